@@ -1,0 +1,1 @@
+"""stucco_drake: soft tracking of contacts in clutter (STUCCO) on Drake."""

@@ -1,0 +1,27 @@
+"""The method in pure numpy/scipy: soft tracking, segmentation, signed distances, metrics.
+
+Nothing in this package imports pydrake, so it is testable in milliseconds without a simulator.
+"""
+
+from stucco_drake.core.dynamics import TranslationDynamics
+from stucco_drake.core.metrics import ambiguity, contact_error, fowlkes_mallows
+from stucco_drake.core.params import SoftTrackingParams
+from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.sdf import GridSdf
+from stucco_drake.core.segmentation import connected_components
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.core.soft_tracker import SoftTracker
+
+__all__ = [
+    "BoxSdf",
+    "CylinderSdf",
+    "GridSdf",
+    "RobotPenetration",
+    "SoftTracker",
+    "SoftTrackingParams",
+    "TranslationDynamics",
+    "ambiguity",
+    "connected_components",
+    "contact_error",
+    "fowlkes_mallows",
+]

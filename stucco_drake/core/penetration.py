@@ -1,0 +1,194 @@
+"""pxpen: how deep points lie inside the robot at given end-effector poses, batched and culled."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from stucco_drake.core.sdf import GridSdf
+
+#: Integer grid coordinates use int16 while every coordinate stays within this many cells.
+_INT16_LIMIT = 16000
+#: Stand-in coordinate of a skipped config: every difference with it falls outside the grid.
+_SKIP = 16383
+
+
+class RobotPenetration:
+    """The paper's pxpen(x, p): penetration depth (m) of point p into the robot at EE pose x.
+
+    The robot's geometry is a :class:`~stucco_drake.core.sdf.GridSdf` in the end-effector frame E
+    (for the Drake scene, built once from Drake's distance queries and cached). A pose x is
+    (p_WE, R_WE): a world point p_W is looked up at p_E = R_WE^T (p_W - p_WE).
+
+    Args:
+        robot_sdf: signed distance of the robot in frame E (m, negative inside).
+        pair_budget: (config, point) pairs per vectorised block; bounds scratch memory.
+    """
+
+    def __init__(self, robot_sdf: GridSdf, pair_budget: int = 1 << 20):
+        if not isinstance(robot_sdf, GridSdf):
+            raise ValueError(f"robot_sdf: expected a GridSdf, got {type(robot_sdf).__name__}")
+        self.robot_sdf = robot_sdf
+        self.pair_budget = int(pair_budget)
+        self._workspace: dict[str, np.ndarray] = {}
+        self._crops: dict[float, tuple] = {}
+
+    def __call__(self, config_positions, points, config_rotation=None) -> np.ndarray:
+        """Depth (m, >= 0) of ``points[..., 3]`` inside the robot at ``config_positions[..., 3]``.
+
+        Leading dimensions broadcast. ``config_rotation`` is one R_WE (3, 3) for all configs
+        (identity when omitted).
+        """
+        relative = np.asarray(points, dtype=np.float64) - np.asarray(config_positions, np.float64)
+        if config_rotation is not None:
+            relative = relative @ np.asarray(config_rotation, dtype=np.float64)
+        return np.maximum(-self.robot_sdf(relative), 0.0)
+
+    # -------------------------------------------------------------------------------- hot path
+    def _buffer(self, name: str, size: int, dtype) -> np.ndarray:
+        """Reused scratch memory: fresh multi-megabyte arrays cost page faults on every call."""
+        buffer = self._workspace.get(name)
+        if buffer is None or buffer.size < size or buffer.dtype != dtype:
+            buffer = np.empty(size, dtype=dtype)
+            self._workspace[name] = buffer
+        return buffer[:size]
+
+    def _crop(self, tolerance: float):
+        """Node box where a pair can penetrate deeper than ``tolerance``, and its node values.
+
+        A pair's quantised grid coordinate g (rounded point minus rounded config) is within one
+        cell per axis of its true coordinate t, so every corner of t's cell is within two cells
+        of g. The interpolant at t is below -tolerance only if a corner is, so g lies in the box
+        of such nodes grown by two cells; and since node values sample a 1-Lipschitz distance,
+        the interpolant is at least value(g) - 2 sqrt(3) h: pairs with value(g) >= ``level``
+        cannot penetrate that deep. Nodes of the box outside the grid get -inf (always checked).
+        """
+        key = float(tolerance)
+        if key not in self._crops:
+            grid = self.robot_sdf
+            deep = np.argwhere(grid.values < -tolerance)
+            if len(deep) == 0:
+                self._crops[key] = None
+            else:
+                lo = deep.min(axis=0) - 2
+                hi = deep.max(axis=0) + 3
+                values = np.full(tuple(hi - lo), -np.inf, dtype=np.float32)
+                src_lo = np.maximum(lo, 0)
+                src_hi = np.minimum(hi, grid.values.shape)
+                values[
+                    tuple(slice(a - b, c - b) for a, b, c in zip(src_lo, lo, src_hi, strict=True))
+                ] = grid.values[tuple(slice(a, c) for a, c in zip(src_lo, src_hi, strict=True))]
+                level = -tolerance + 2.0 * math.sqrt(3.0) * grid.resolution * 1.001
+                self._crops[key] = (lo, values, level)
+        return self._crops[key]
+
+    def _quantise(self, coordinates, offset, skip_nan: bool):
+        """Round (3, ...) positions to grid cells, minus ``offset`` cells per axis."""
+        h = self.robot_sdf.resolution
+        scaled = coordinates / np.float32(h) - offset.reshape(3, *([1] * (coordinates.ndim - 1)))
+        nan = np.isnan(scaled) if skip_nan else None
+        if nan is not None and nan.any():
+            scaled = np.where(nan, _SKIP, scaled)
+        return np.rint(scaled)
+
+    def excess_sums(self, points_e, configs_e, tolerance: float):
+        """Sum, per particle and per point, the penetration beyond ``tolerance`` of every pair.
+
+        Args:
+            points_e: (3, n_particles, n_points) float32 point coordinates along the EE axes
+                (world points already rotated by R_WE^T of the configs' common orientation).
+            configs_e: (3, n_particles or 1, n_configs) float32 EE origins along the same axes;
+                NaN marks a config to skip (it belongs to another orientation).
+            tolerance: penetration (m) ignored per pair.
+
+        Returns:
+            per_particle (n_particles,) and per_point (n_particles, n_points) float64 sums of
+            max(0, depth - tolerance) over all (config, point) pairs.
+
+        Every pair is first culled on integer grid coordinates (one subtraction and one unsigned
+        comparison per axis), then screened by the nearest node's value, and only the few pairs
+        left are interpolated exactly. Work runs in blocks of about ``pair_budget`` pairs.
+        """
+        _, n_particles, n_points = points_e.shape
+        n_configs = configs_e.shape[2]
+        per_particle = np.zeros(n_particles)
+        per_point = np.zeros((n_particles, n_points))
+        crop = self._crop(tolerance)
+        if n_points == 0 or n_configs == 0 or crop is None:
+            return per_particle, per_point
+        crop_lo, crop_values, level = crop
+        extent = np.array(crop_values.shape)
+        grid = self.robot_sdf
+        origin_cells = grid.lower / grid.resolution
+        point_cells = self._quantise(points_e, origin_cells + crop_lo, skip_nan=False)
+        config_cells = self._quantise(configs_e, np.zeros(3), skip_nan=True)
+        small = max(np.abs(point_cells).max(), np.abs(config_cells).max()) <= _INT16_LIMIT
+        itype, utype = (np.int16, np.uint16) if small else (np.int32, np.uint32)
+        if not small:
+            config_cells = np.where(config_cells == _SKIP, 1 << 30, config_cells)
+        point_cells = point_cells.astype(itype)
+        config_cells = config_cells.astype(itype)
+        shared_configs = configs_e.shape[1] == 1
+        pairs_per_particle = n_configs * n_points
+        block = max(1, min(n_particles, self.pair_budget // pairs_per_particle))
+        scratch = self._buffer(f"cells_{itype.__name__}", block * pairs_per_particle, itype)
+        mask = self._buffer("mask", block * pairs_per_particle, np.bool_)
+        axis_mask = self._buffer("axis_mask", block * pairs_per_particle, np.bool_)
+        strides = np.array([extent[1] * extent[2], extent[2], 1])
+        flat_values = crop_values.ravel()
+        for start in range(0, n_particles, block):  # blocks of particles, bounded memory
+            stop = min(start + block, n_particles)
+            size = (stop - start) * pairs_per_particle
+            shape = (stop - start, n_configs, n_points)
+            cells, inside, axis_inside = (
+                b[:size].reshape(shape) for b in (scratch, mask, axis_mask)
+            )
+            config_rows = slice(0, 1) if shared_configs else slice(start, stop)
+            for axis in range(3):
+                np.subtract(
+                    point_cells[axis, start:stop, None, :],
+                    config_cells[axis, config_rows, :, None],
+                    out=cells,
+                )
+                # Negative differences wrap to large unsigned values: one test for 0 <= g < n.
+                np.less(cells.view(utype), extent[axis], out=inside if axis == 0 else axis_inside)
+                if axis:
+                    np.logical_and(inside, axis_inside, out=inside)
+            flat = np.flatnonzero(inside)
+            if flat.size == 0:
+                continue
+            particle = flat // pairs_per_particle
+            remainder = flat - particle * pairs_per_particle
+            config = remainder // n_points
+            point = remainder - config * n_points
+            rows = start + particle
+            config_particle = np.zeros_like(rows) if shared_configs else rows
+            node = sum(
+                (
+                    point_cells[a, rows, point].astype(np.int64)
+                    - config_cells[a, config_particle, config]
+                )
+                * strides[a]
+                for a in range(3)
+            )
+            near = flat_values[node] < level
+            if not near.any():
+                continue
+            particle, point, rows, config, config_particle = (
+                v[near] for v in (particle, point, rows, config, config_particle)
+            )
+            relative = np.stack(
+                [
+                    points_e[a, rows, point].astype(np.float64)
+                    - configs_e[a, config_particle, config]
+                    for a in range(3)
+                ],
+                axis=-1,
+            )
+            excess = np.maximum(-grid(relative) - tolerance, 0.0)
+            per_particle[start:stop] += np.bincount(particle, excess, minlength=stop - start)
+            per_point[start:stop] += np.bincount(
+                particle * n_points + point, excess, minlength=(stop - start) * n_points
+            ).reshape(stop - start, n_points)
+        return per_particle, per_point

@@ -1,0 +1,110 @@
+"""Where stucco_drake's model files live, and how a Drake ``Parser`` finds them.
+
+Every model (the iiwa14 arm, the soft-bubble gripper, the YCB objects, the table and the wall) is
+in the ``models/`` folder, which ``models/package.xml`` declares as the package
+``stucco_drake_models``. Refer to a model by its URL, ``model_url("ycb/003_cracker_box.sdf")``,
+and let every ``Parser`` that may meet such a URL go through :func:`configure_parser` first.
+
+Nothing here touches the network: all models use primitive shapes and no ``drake_models`` files.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path, PurePosixPath
+
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.tree import ModelInstanceIndex
+
+PACKAGE_NAME = "stucco_drake_models"
+
+
+def _find_models_dir() -> Path:
+    """The repository's ``models/`` folder, else a ``models/`` folder shipped inside the package."""
+    here = Path(__file__).resolve().parent
+    source_tree = here.parent / "models"
+    if (source_tree / "package.xml").is_file():
+        return source_tree
+    return here / "models"
+
+
+MODELS_DIR: Path = _find_models_dir()
+
+#: The grasp centre (frame ``gripper_frame``) lies this far along the flange's z axis [m].
+FLANGE_TO_GRIPPER_FRAME_Z = 0.12
+
+
+def configure_parser(parser: Parser) -> Parser:
+    """Registers the ``stucco_drake_models`` package with ``parser`` (idempotent); returns it.
+
+    This is the one place that adds our ``package.xml`` to a package map. Call it on every
+    ``Parser`` (simulation plant, controller plant, observer plant) before adding models.
+
+    It also removes Drake's remote ``drake_models`` package from the map, so that a stray
+    ``package://drake_models/...`` reference fails at once ("unknown package") instead of
+    starting a download. (Setting ``DRAKE_ALLOW_NETWORK`` without ``package_map`` cannot do this
+    with the pip wheel of Drake: there, every ``Parser`` construction then raises, because the
+    default package map registers ``drake_models`` as a download-only package.)
+    """
+    package_map = parser.package_map()
+    if package_map.Contains("drake_models"):
+        package_map.Remove("drake_models")
+    if not package_map.Contains(PACKAGE_NAME):
+        package_map.AddPackageXml(str(MODELS_DIR / "package.xml"))
+    return parser
+
+
+def model_url(relative: str) -> str:
+    """``package://stucco_drake_models/<relative>`` for a file under ``models/``.
+
+    Raises ValueError for an absolute path or one leaving ``models/``, and FileNotFoundError when
+    the file does not exist, so that a typo fails here rather than deep inside the parser.
+    """
+    rel = PurePosixPath(relative)
+    if rel.is_absolute() or ".." in rel.parts or not rel.parts:
+        raise ValueError(f"expected a path relative to the models folder, got {relative!r}")
+    if not (MODELS_DIR / rel).is_file():
+        raise FileNotFoundError(f"no model file {rel} in package {PACKAGE_NAME}")
+    return f"package://{PACKAGE_NAME}/{rel}"
+
+
+IIWA14_URL = model_url("iiwa14/iiwa14.urdf")
+BUBBLE_GRIPPER_URL = model_url("bubble_gripper/bubble_gripper.sdf")
+TABLE_URL = model_url("table.sdf")
+WALL_URL = model_url("wall.sdf")
+
+
+def add_iiwa14_with_bubble_gripper(
+    parser: Parser, *, iiwa_name: str = "iiwa", gripper_name: str = "bubble_gripper"
+) -> tuple[ModelInstanceIndex, ModelInstanceIndex]:
+    """Adds the iiwa14 and the bubble gripper welded to its flange; returns both instances.
+
+    The gripper's mounting frame is welded to ``iiwa_link_ee`` with the identity transform, and a
+    collision filter group excludes contact between the wrist links 5-7 and every gripper body
+    (each model file filters its own parts, but neither file can name the other's bodies). The
+    arm's base ``iiwa_link_0`` is left free: weld it where the scene wants it.
+    """
+    configure_parser(parser)
+    a, g = iiwa_name, gripper_name
+    members = ", ".join(
+        [f"{a}::iiwa_link_{i}" for i in (5, 6, 7)]
+        + [f"{g}::{body}" for body in ("body", "left_finger", "right_finger")]
+    )
+    directives = f"""
+directives:
+- add_model:
+    name: {a}
+    file: {IIWA14_URL}
+- add_model:
+    name: {g}
+    file: {BUBBLE_GRIPPER_URL}
+- add_weld:
+    parent: {a}::iiwa_link_ee
+    child: {g}::body
+- add_collision_filter_group:
+    name: {a}_wrist_and_{g}
+    members: [{members}]
+    ignored_collision_filter_groups: [{a}_wrist_and_{g}]
+"""
+    parser.AddModelsFromString(directives, "dmd.yaml")
+    plant = parser.plant()
+    return plant.GetModelInstanceByName(a), plant.GetModelInstanceByName(g)

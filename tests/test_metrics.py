@@ -1,0 +1,58 @@
+"""Metrics against definitions computed the slow way."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from stucco_drake.core import BoxSdf, ambiguity, contact_error, fowlkes_mallows
+
+
+def brute_force_fmi(truth, pred):
+    pairs = list(itertools.combinations(range(len(truth)), 2))
+    same_true = np.array([truth[i] == truth[j] for i, j in pairs])
+    same_pred = np.array([pred[i] == pred[j] for i, j in pairs])
+    both = np.sum(same_true & same_pred)
+    if both == 0:
+        return 0.0
+    return both / np.sqrt(same_true.sum() * same_pred.sum())
+
+
+def test_fowlkes_mallows_equals_brute_force_pair_count_on_random_labelings():
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        n = int(rng.integers(2, 30))
+        truth = rng.integers(0, rng.integers(1, 6), n)
+        pred = rng.integers(0, rng.integers(1, 6), n) * 7 - 3  # arbitrary label values
+        assert fowlkes_mallows(truth, pred) == pytest.approx(
+            brute_force_fmi(truth, pred), abs=1e-12
+        )
+
+
+def test_fowlkes_mallows_extremes_and_errors():
+    assert fowlkes_mallows([0, 0, 1, 1], [5, 5, 2, 2]) == 1.0
+    assert fowlkes_mallows([0, 1, 2], [0, 1, 2]) == 0.0  # no pairs at all: sklearn's convention
+    with pytest.raises(ValueError, match="equal length"):
+        fowlkes_mallows([0, 1], [0])
+
+
+def test_contact_error_is_mean_distance_to_nearest_surface():
+    boxes = [BoxSdf((0.05, 0.05, 0.05), (0.0, 0.0, 0.0)), BoxSdf((0.05, 0.05, 0.05), (1.0, 0, 0))]
+    points = [[0.06, 0.0, 0.0], [0.0, 0.0, 0.03], [0.93, 0.0, 0.0]]  # 1 cm out, 2 cm in, 2 cm out
+    assert contact_error(points, boxes) == pytest.approx((0.01 + 0.02 + 0.02) / 3, abs=1e-12)
+    with pytest.raises(ValueError, match="no tracked points"):
+        contact_error(np.zeros((0, 3)), boxes)
+    with pytest.raises(ValueError, match="points"):
+        contact_error([[np.nan, 0.0, 0.0]], boxes)
+
+
+def test_ambiguity_is_mean_closeness_of_the_second_object_over_contact_steps():
+    # Distances (m) from the robot to each of 3 touched objects at 4 steps; contact at 0, 1, 3.
+    distances = [[0.0, 0.10, 0.5], [0.0, 0.30, 0.5], [0.2, 0.2, 0.2], [0.0, 0.01, 0.14]]
+    in_contact = [True, True, False, True]
+    # Second-closest: 0.10, 0.30, -, 0.01 -> per step (0.15 - d2)/0.15 floored at 0.
+    expected = (0.05 / 0.15 + 0.0 + 0.14 / 0.15) / 3
+    assert ambiguity(distances, in_contact) == pytest.approx(expected, abs=1e-12)
+    assert ambiguity(distances, [False] * 4) == 0.0
+    with pytest.raises(ValueError, match="in_contact"):
+        ambiguity(distances, [True])
