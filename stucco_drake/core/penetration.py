@@ -137,6 +137,10 @@ class RobotPenetration:
         axis_mask = self._buffer("axis_mask", block * pairs_per_particle, np.bool_)
         strides = np.array([extent[1] * extent[2], extent[2], 1])
         flat_values = crop_values.ravel()
+        # Flat crop index of a pair = point's flat index - config's (both in cells): two gathers
+        # per surviving pair instead of six. Skipped configs only ever reach culled pairs.
+        point_nodes = np.tensordot(strides, point_cells.astype(np.int64), axes=1)
+        config_nodes = np.tensordot(strides, config_cells.astype(np.int64), axes=1)
         for start in range(0, n_particles, block):  # blocks of particles, bounded memory
             stop = min(start + block, n_particles)
             size = (stop - start) * pairs_per_particle
@@ -164,14 +168,7 @@ class RobotPenetration:
             point = remainder - config * n_points
             rows = start + particle
             config_particle = np.zeros_like(rows) if shared_configs else rows
-            node = sum(
-                (
-                    point_cells[a, rows, point].astype(np.int64)
-                    - config_cells[a, config_particle, config]
-                )
-                * strides[a]
-                for a in range(3)
-            )
+            node = point_nodes[rows, point] - config_nodes[config_particle, config]
             near = flat_values[node] < level
             if not near.any():
                 continue

@@ -173,12 +173,20 @@ def random_clutter(
     return PlanarPushWorld(centers, halves, (-extent - 0.15, 0.0), ee_radius=ee_radius)
 
 
-def rummage(world: PlanarPushWorld, rng: np.random.Generator, extent: float = 0.35):
-    """Endless greedy rummaging: steps of up to 3 cm towards random goals, with jitter."""
-    goal = rng.uniform(-extent, extent, 2)
+def rummage(world: PlanarPushWorld, rng: np.random.Generator):
+    """Endless greedy rummaging: steps of up to 3 cm towards randomly chosen boxes, with jitter.
+
+    Goals are box centres (at the time of choosing), so the EE keeps finding the clutter even
+    after it has pushed it around; a goal is dropped once reached or with probability 0.05.
+    """
+
+    def new_goal():
+        return world.box_centers[rng.integers(len(world.box_centers))] + rng.normal(0, 0.03, 2)
+
+    goal = new_goal()
     while True:
         if np.linalg.norm(goal - world.ee) < 0.03 or rng.random() < 0.05:
-            goal = rng.uniform(-extent, extent, 2)
+            goal = new_goal()
         step = np.clip(goal - world.ee, -0.03, 0.03) + rng.uniform(-0.01, 0.01, 2)
         yield world.step(np.clip(step, -0.03, 0.03))
 
