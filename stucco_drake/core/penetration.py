@@ -92,6 +92,28 @@ class RobotPenetration:
             scaled = np.where(nan, _SKIP, scaled)
         return np.rint(scaled)
 
+    @staticmethod
+    def _candidate_pairs(point_cells, config_cells, extent):
+        """(config, point) index pairs that fall in the crop box in at least one particle.
+
+        A contact's point and config take a few distinct positions across particles, so the
+        box test on their ranges over all particles (n_configs x n_points work) discards most
+        pairs before the per-particle test (n_particles x pairs work). Conservative: a pair
+        kept here may still be culled per particle. Skipped configs have huge coordinates, so a
+        config skipped in every particle never passes.
+        """
+        possible = None
+        for axis in range(3):
+            points = point_cells[axis].astype(np.int32)
+            configs = config_cells[axis].astype(np.int32)
+            # Some particle has 0 <= point - config < extent only if the ranges allow it.
+            upper = points.max(axis=0)[None, :] - configs.min(axis=0)[:, None] >= 0
+            lower = points.min(axis=0)[None, :] - configs.max(axis=0)[:, None] < extent[axis]
+            axis_possible = upper & lower
+            possible = axis_possible if possible is None else possible & axis_possible
+        config_index, point_index = np.nonzero(possible)
+        return config_index, point_index
+
     def excess_sums(self, points_e, configs_e, tolerance: float):
         """Sum, per particle and per point, the penetration beyond ``tolerance`` of every pair.
 
@@ -130,11 +152,15 @@ class RobotPenetration:
         point_cells = point_cells.astype(itype)
         config_cells = config_cells.astype(itype)
         shared_configs = configs_e.shape[1] == 1
-        pairs_per_particle = n_configs * n_points
-        block = max(1, min(n_particles, self.pair_budget // pairs_per_particle))
-        scratch = self._buffer(f"cells_{itype.__name__}", block * pairs_per_particle, itype)
-        mask = self._buffer("mask", block * pairs_per_particle, np.bool_)
-        axis_mask = self._buffer("axis_mask", block * pairs_per_particle, np.bool_)
+        config_of_pair, point_of_pair = self._candidate_pairs(point_cells, config_cells, extent)
+        n_pairs = config_of_pair.size
+        if n_pairs == 0:
+            return per_particle, per_point
+        block = max(1, min(n_particles, self.pair_budget // n_pairs))
+        scratch = self._buffer(f"cells_{itype.__name__}", block * n_pairs, itype)
+        gathered = self._buffer(f"gathered_{itype.__name__}", 2 * block * n_pairs, itype)
+        mask = self._buffer("mask", block * n_pairs, np.bool_)
+        axis_mask = self._buffer("axis_mask", block * n_pairs, np.bool_)
         strides = np.array([extent[1] * extent[2], extent[2], 1])
         flat_values = crop_values.ravel()
         # Flat crop index of a pair = point's flat index - config's (both in cells): two gathers
@@ -143,18 +169,17 @@ class RobotPenetration:
         config_nodes = np.tensordot(strides, config_cells.astype(np.int64), axes=1)
         for start in range(0, n_particles, block):  # blocks of particles, bounded memory
             stop = min(start + block, n_particles)
-            size = (stop - start) * pairs_per_particle
-            shape = (stop - start, n_configs, n_points)
-            cells, inside, axis_inside = (
-                b[:size].reshape(shape) for b in (scratch, mask, axis_mask)
-            )
+            size = (stop - start) * n_pairs
             config_rows = slice(0, 1) if shared_configs else slice(start, stop)
+            n_config_rows = 1 if shared_configs else stop - start
+            cells, inside, axis_inside = (b[:size].reshape(-1, n_pairs)
+                                          for b in (scratch, mask, axis_mask))
+            point_side = gathered[:size].reshape(-1, n_pairs)
+            config_side = gathered[size : size + n_config_rows * n_pairs].reshape(-1, n_pairs)
             for axis in range(3):
-                np.subtract(
-                    point_cells[axis, start:stop, None, :],
-                    config_cells[axis, config_rows, :, None],
-                    out=cells,
-                )
+                np.take(point_cells[axis, start:stop], point_of_pair, axis=1, out=point_side)
+                np.take(config_cells[axis, config_rows], config_of_pair, axis=1, out=config_side)
+                np.subtract(point_side, config_side, out=cells)
                 # Negative differences wrap to large unsigned values: one test for 0 <= g < n.
                 np.less(cells.view(utype), extent[axis], out=inside if axis == 0 else axis_inside)
                 if axis:
@@ -162,10 +187,10 @@ class RobotPenetration:
             flat = np.flatnonzero(inside)
             if flat.size == 0:
                 continue
-            particle = flat // pairs_per_particle
-            remainder = flat - particle * pairs_per_particle
-            config = remainder // n_points
-            point = remainder - config * n_points
+            particle = flat // n_pairs
+            pair = flat - particle * n_pairs
+            config = config_of_pair[pair]
+            point = point_of_pair[pair]
             rows = start + particle
             config_particle = np.zeros_like(rows) if shared_configs else rows
             node = point_nodes[rows, point] - config_nodes[config_particle, config]
