@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from stucco_drake.core.npz import save_npz_atomically
+
 #: Version of the ``.npz`` layout written by :meth:`ResidualStatistics.save`.
 _FORMAT_VERSION = 1
 
@@ -75,18 +77,14 @@ class ResidualStatistics:
 
     def save(self, path: str | Path) -> None:
         """Write to ``path`` (.npz), atomically (write a temporary file, then rename it)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(
-            tmp,
+        save_npz_atomically(
+            path,
             mean=self.mean,
             covariance=self.covariance,
             n_samples=self.n_samples,
             key=np.array(self.key),
             format=_FORMAT_VERSION,
         )
-        tmp.replace(path)
 
     @classmethod
     def load(cls, path: str | Path) -> ResidualStatistics:

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from stucco_drake.core.npz import save_npz_atomically
+
 #: Version of the ``.npz`` layout; a cache file of another version is rebuilt.
 _FORMAT_VERSION = 1
 
@@ -120,18 +122,15 @@ class GridSdf:
 
     def save(self, path: str | Path) -> None:
         """Write the grid to ``path`` (.npz), atomically."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(
-            tmp,
+        save_npz_atomically(
+            path,
+            compressed=True,
             lower=self.lower,
             resolution=self.resolution,
             values=self.values,
             key=np.array(self.key),
             format=np.array(_FORMAT_VERSION),
         )
-        tmp.replace(path)
 
     @classmethod
     def load(cls, path: str | Path) -> GridSdf:
