@@ -5,23 +5,29 @@ Nothing in this package imports pydrake, so it is testable in milliseconds witho
 
 from stucco_drake.core.dynamics import TranslationDynamics
 from stucco_drake.core.metrics import ambiguity, contact_error, fowlkes_mallows
+from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.sdf import GridSdf
 from stucco_drake.core.segmentation import connected_components
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.soft_tracker import SoftTracker
+from stucco_drake.core.target_pose import estimate_target_pose
+from stucco_drake.core.tracker import Tracker
 
 __all__ = [
+    "ActionContacts",
     "BoxSdf",
     "CylinderSdf",
     "GridSdf",
     "RobotPenetration",
     "SoftTracker",
     "SoftTrackingParams",
+    "Tracker",
     "TranslationDynamics",
     "ambiguity",
     "connected_components",
     "contact_error",
+    "estimate_target_pose",
     "fowlkes_mallows",
 ]

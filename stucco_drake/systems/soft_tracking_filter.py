@@ -1,0 +1,114 @@
+"""SoftTrackingFilter: STUCCO (or any Tracker) as a Drake system, updated once per action."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import LeafSystem
+
+from stucco_drake.core.observation import ActionContacts
+from stucco_drake.core.tracker import Tracker
+
+
+@dataclasses.dataclass
+class TrackingState:
+    """The filter's abstract state: the belief, its random stream and the action it last saw.
+
+    Drake clones abstract state with ``copy.deepcopy``: a cloned context carries a copy of the
+    belief and of the generator's position, so re-running it gives identical results.
+    """
+
+    tracker: Tracker
+    rng: np.random.Generator
+    last_action_index: int = -1
+    n_updates: int = 0
+
+    def __deepcopy__(self, memo):
+        return TrackingState(
+            copy.deepcopy(self.tracker, memo),
+            copy.deepcopy(self.rng, memo),
+            self.last_action_index,
+            self.n_updates,
+        )
+
+
+class SoftTrackingFilter(LeafSystem):
+    """Feeds each completed action's contacts to a contact tracker (paper Algorithm 1).
+
+    Input ports:
+        ee_pose: RigidTransform X_WE of the end effector (m, world) — x_t of the paper, read when
+            an action completes.
+        action_contacts: :class:`~stucco_drake.core.observation.ActionContacts` of the last
+            completed action. When its ``action_index`` differs from the last one seen, the
+            tracker takes one update with its points and dx (none: an out-of-contact update).
+
+    Output ports:
+        map_points: (n, 3) numpy array, the tracker's MAP contact points (m, world).
+        segment_labels: (n,) numpy int array, object labels of those points (Algorithm 3).
+
+    The check is a periodic unrestricted-update event (every ``check_period`` s, typically the
+    plant's time step), so the update happens on the action clock without any side effect in
+    an output calculation.
+
+    Args:
+        tracker: a fresh tracker (``SoftTracker`` or a baseline); the filter's default state
+            holds a deep copy of it, so one instance can build several diagrams.
+        seed: seed of the numpy Generator every draw of the tracker comes from.
+        check_period: how often (s) to look for a newly completed action.
+    """
+
+    def __init__(self, tracker: Tracker, seed: int, check_period: float):
+        super().__init__()
+        if not isinstance(tracker, Tracker):
+            raise ValueError(f"tracker: {type(tracker).__name__} is not a contact Tracker")
+        if not check_period > 0:
+            raise ValueError(f"check_period: must be > 0 s, got {check_period!r}")
+        self._ee_pose = self.DeclareAbstractInputPort(
+            "ee_pose", AbstractValue.Make(RigidTransform())
+        )
+        self._contacts = self.DeclareAbstractInputPort(
+            "action_contacts", AbstractValue.Make(ActionContacts())
+        )
+        initial = TrackingState(copy.deepcopy(tracker), np.random.default_rng(seed))
+        self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
+        self.DeclareAbstractOutputPort(
+            "map_points", lambda: AbstractValue.Make(np.zeros((0, 3))), self._calc_points
+        )
+        self.DeclareAbstractOutputPort(
+            "segment_labels",
+            lambda: AbstractValue.Make(np.zeros(0, dtype=np.int64)),
+            self._calc_labels,
+        )
+        self.DeclarePeriodicUnrestrictedUpdateEvent(check_period, 0.0, self._on_step)
+
+    def tracking_state(self, context) -> TrackingState:
+        """The belief held in ``context`` (read-only use)."""
+        return context.get_abstract_state(int(self._state)).get_value()
+
+    def _on_step(self, context, state):
+        contacts = self._contacts.Eval(context)
+        current = self.tracking_state(context)
+        if contacts.action_index == current.last_action_index:
+            return
+        updated = copy.deepcopy(current)
+        pose = self._ee_pose.Eval(context)
+        updated.tracker.update(
+            updated.rng,
+            pose.translation(),
+            contacts.points,
+            contacts.dx,
+            pose.rotation().matrix(),
+        )
+        updated.last_action_index = contacts.action_index
+        updated.n_updates += 1
+        state.get_mutable_abstract_state(int(self._state)).set_value(updated)
+
+    def _calc_points(self, context, output):
+        output.set_value(self.tracking_state(context).tracker.map_points())
+
+    def _calc_labels(self, context, output):
+        output.set_value(np.asarray(self.tracking_state(context).tracker.segment()))
