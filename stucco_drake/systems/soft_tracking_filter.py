@@ -24,14 +24,14 @@ class TrackingState:
 
     tracker: Tracker
     rng: np.random.Generator
-    last_action_index: int = -1
+    last_action: ActionContacts = dataclasses.field(default_factory=ActionContacts)
     n_updates: int = 0
 
     def __deepcopy__(self, memo):
         return TrackingState(
             copy.deepcopy(self.tracker, memo),
             copy.deepcopy(self.rng, memo),
-            self.last_action_index,
+            self.last_action,  # immutable
             self.n_updates,
         )
 
@@ -49,6 +49,8 @@ class SoftTrackingFilter(LeafSystem):
     Output ports:
         map_points: (n, 3) numpy array, the tracker's MAP contact points (m, world).
         segment_labels: (n,) numpy int array, object labels of those points (Algorithm 3).
+        tracked_action: the :class:`ActionContacts` of the last update taken; systems that
+            read the outputs after each update (the target-pose estimator) key on it.
 
     The check is a periodic unrestricted-update event (every ``check_period`` s, typically the
     plant's time step), so the update happens on the action clock without any side effect in
@@ -83,6 +85,9 @@ class SoftTrackingFilter(LeafSystem):
             lambda: AbstractValue.Make(np.zeros(0, dtype=np.int64)),
             self._calc_labels,
         )
+        self.DeclareAbstractOutputPort(
+            "tracked_action", lambda: AbstractValue.Make(ActionContacts()), self._calc_action
+        )
         self.DeclarePeriodicUnrestrictedUpdateEvent(check_period, 0.0, self._on_step)
 
     def tracking_state(self, context) -> TrackingState:
@@ -92,7 +97,7 @@ class SoftTrackingFilter(LeafSystem):
     def _on_step(self, context, state):
         contacts = self._contacts.Eval(context)
         current = self.tracking_state(context)
-        if contacts.action_index == current.last_action_index:
+        if contacts.action_index == current.last_action.action_index:
             return
         updated = copy.deepcopy(current)
         pose = self._ee_pose.Eval(context)
@@ -103,7 +108,7 @@ class SoftTrackingFilter(LeafSystem):
             contacts.dx,
             pose.rotation().matrix(),
         )
-        updated.last_action_index = contacts.action_index
+        updated.last_action = contacts
         updated.n_updates += 1
         state.get_mutable_abstract_state(int(self._state)).set_value(updated)
 
@@ -112,3 +117,6 @@ class SoftTrackingFilter(LeafSystem):
 
     def _calc_labels(self, context, output):
         output.set_value(np.asarray(self.tracking_state(context).tracker.segment()))
+
+    def _calc_action(self, context, output):
+        output.set_value(self.tracking_state(context).last_action)
