@@ -1,0 +1,312 @@
+"""Contact isolation on the bubble gripper: where on its surface did the detected contact happen?
+
+- :func:`sample_gripper_surface`: area-uniform points and outward normals on the gripper's Drake
+  collision shapes (boxes, ellipsoids), in ``gripper_frame``.
+- :class:`GripperPoseFromState`: forward kinematics of the measured arm state to the pose vector
+  the isolator reads.
+- :class:`ContactIsolator`: per step, bubble contact points when a bubble sensor fires (the
+  paper's real-robot order, Sec. V-E), else the contact particle filter of
+  :mod:`stucco_drake.core.contact_isolation` on the estimated end-effector wrench.
+
+Pose convention (port ``gripper_pose``): a 7-vector [x, y, z, qw, qx, qy, qz], the position (m)
+of the origin of ``gripper_frame`` in world and the unit quaternion of its orientation R_WG
+(Drake's w-first order). The quaternion is normalised on read.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import trimesh
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import Box, Ellipsoid, Role, Sphere
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+
+from stucco_drake.core.contact_isolation import ContactParticleFilter
+from stucco_drake.models import BUBBLE_GRIPPER_URL, FLANGE_TO_GRIPPER_FRAME_Z, configure_parser
+from stucco_drake.systems.wrench_estimator import N_ARM, make_robot_plant
+
+#: contact_source values.
+SOURCE_NONE, SOURCE_CPF, SOURCE_BUBBLE = 0.0, 1.0, 2.0
+_INSIDE_TOLERANCE = 1e-4  # m: samples deeper than this inside another shape are hidden
+
+
+# ------------------------------------------------------------------------------ surface samples
+def gripper_collision_shapes(opening: float = 0.03):
+    """The gripper's proximity shapes in ``gripper_frame``: a list of (kind, dims, X_GS 4x4).
+
+    kind is "box" (dims = full sizes, m) or "ellipsoid" (dims = semi-axes, m; spheres too).
+    Both fingers are placed at ``opening`` (m, each finger joint's position).
+    """
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    (gripper,) = configure_parser(Parser(plant)).AddModels(url=BUBBLE_GRIPPER_URL)
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("gripper_frame", gripper))
+    for name in ("left_finger_joint", "right_finger_joint"):
+        plant.GetJointByName(name, gripper).set_default_translation(float(opening))
+    plant.Finalize()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))
+    inspector = query.inspector()
+    shapes = []
+    for gid in inspector.GetAllGeometryIds(Role.kProximity):
+        shape, X = inspector.GetShape(gid), query.GetPoseInWorld(gid).GetAsMatrix4()
+        if isinstance(shape, Box):
+            shapes.append(("box", np.array([shape.width(), shape.depth(), shape.height()]), X))
+        elif isinstance(shape, Ellipsoid):
+            shapes.append(("ellipsoid", np.array([shape.a(), shape.b(), shape.c()]), X))
+        elif isinstance(shape, Sphere):
+            shapes.append(("ellipsoid", np.full(3, shape.radius()), X))
+        else:
+            raise ValueError(f"{inspector.GetName(gid)}: cannot sample a {type(shape).__name__}")
+    return shapes
+
+
+def _inside(kind: str, dims, X, points) -> np.ndarray:
+    """Depth-tolerant inside test of ``points`` (N, 3) in shape (kind, dims, X)."""
+    local = (points - X[:3, 3]) @ X[:3, :3]
+    if kind == "box":
+        return np.all(np.abs(local) < dims / 2 - _INSIDE_TOLERANCE, axis=1)
+    return np.sum((local / (dims - _INSIDE_TOLERANCE)) ** 2, axis=1) < 1.0
+
+
+def sample_gripper_surface(rng: np.random.Generator, spacing: float = 0.004,
+                           opening: float = 0.03, shapes=None):  # fmt: skip
+    """Area-uniform samples (about one per ``spacing``^2 m^2) of the gripper's outer surface.
+
+    Each shape is meshed with trimesh (ellipsoids from a subdivided icosphere, then pushed onto
+    the exact surface), its faces are drawn in proportion to area and a uniform point is drawn
+    in each. Samples hidden inside another shape (bubble halves in their plates) and on the
+    palm's mounting face (against the flange) are dropped. Returns (points, normals), (N, 3)
+    each, in ``gripper_frame`` (m; unit outward normals).
+    """
+    shapes = gripper_collision_shapes(opening) if shapes is None else shapes
+    all_points, all_normals = [], []
+    for kind, dims, X in shapes:
+        if kind == "box":
+            mesh = trimesh.creation.box(extents=dims)
+        else:
+            sphere = trimesh.creation.icosphere(subdivisions=4)
+            mesh = trimesh.Trimesh(sphere.vertices * dims, sphere.faces)
+        n = max(1, round(mesh.area / spacing**2))
+        face = rng.choice(len(mesh.faces), size=n, p=mesh.area_faces / mesh.area)
+        u, v = rng.random(n), rng.random(n)
+        flip = u + v > 1.0  # fold the square onto the triangle: uniform barycentrics
+        u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
+        tri = mesh.triangles[face]
+        a, b = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        local = tri[:, 0] + u[:, None] * a + v[:, None] * b
+        if kind == "box":
+            normal = mesh.face_normals[face]
+        else:
+            # Radially onto the exact ellipsoid; its normal is the gradient p / r^2.
+            local = local / np.sqrt(np.sum((local / dims) ** 2, axis=1))[:, None]
+            normal = local / dims**2
+            normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        all_points.append(local @ X[:3, :3].T + X[:3, 3])
+        all_normals.append(normal @ X[:3, :3].T)
+    points, normals = np.concatenate(all_points), np.concatenate(all_normals)
+    shape_of = np.repeat(np.arange(len(shapes)), [len(p) for p in all_points])
+    keep = np.ones(len(points), dtype=bool)
+    for s, (kind, dims, X) in enumerate(shapes):
+        keep &= ~((shape_of != s) & _inside(kind, dims, X, points))
+    # The palm's top face is bolted to the flange: nothing can touch it.
+    keep &= ~((np.abs(points[:, 2] + FLANGE_TO_GRIPPER_FRAME_Z) < 1e-6) & (normals[:, 2] < -0.9))
+    return points[keep], normals[keep]
+
+
+# ------------------------------------------------------------------------------- pose helpers
+def pose_vector(X: RigidTransform) -> np.ndarray:
+    """[x, y, z, qw, qx, qy, qz] of a RigidTransform (m; unit quaternion)."""
+    return np.r_[X.translation(), X.rotation().ToQuaternion().wxyz()]
+
+
+def pose_from_vector(vector) -> RigidTransform:
+    """Inverse of :func:`pose_vector`; the quaternion is normalised first."""
+    q = np.asarray(vector[3:7], dtype=float)
+    return RigidTransform(Quaternion(q / np.linalg.norm(q)), np.asarray(vector[:3], dtype=float))
+
+
+class GripperPoseFromState(LeafSystem):
+    """Pose of ``gripper_frame`` from the measured arm state, by forward kinematics.
+
+    Input ``state`` (14): the arm's [q (rad); v (rad/s)]; output ``gripper_pose`` (7): see the
+    module's pose convention. Fingers are held at ``finger_positions`` (m); X_WB is the arm
+    base's pose, as for :class:`~stucco_drake.systems.wrench_estimator.ExternalWrenchEstimator`.
+    """
+
+    def __init__(self, *, X_WB: RigidTransform | None = None, finger_positions=(0.03, 0.03)):
+        super().__init__()
+        self._plant = make_robot_plant(X_WB)
+        self._context = self._plant.CreateDefaultContext()
+        self._q = self._plant.GetPositions(self._context)
+        self._q[N_ARM:] = finger_positions
+        self._frame = self._plant.GetFrameByName("gripper_frame")
+        self._state = self.DeclareVectorInputPort("state", 2 * N_ARM)
+        self.DeclareVectorOutputPort("gripper_pose", 7, self._calc)
+
+    def _calc(self, context, output):
+        self._q[:N_ARM] = self._state.Eval(context)[:N_ARM]
+        self._plant.SetPositions(self._context, self._q)
+        output.SetFromVector(pose_vector(self._frame.CalcPoseInWorld(self._context)))
+
+
+# ----------------------------------------------------------------------------------- isolator
+@dataclasses.dataclass(frozen=True)
+class _IsolatorState:
+    """What the isolator keeps between steps (replaced, never mutated, by each update)."""
+
+    step: int = 0
+    particles: np.ndarray | None = None  # CPF particles of the contact under way
+    point_W: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    point_G: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
+    points_W: tuple = ()
+    cost: float = 0.0
+    source: float = SOURCE_NONE
+
+
+class ContactIsolator(LeafSystem):
+    """Contact point(s) in world for each detected contact step: bubbles first, else the CPF.
+
+    Per update (every ``time_step`` s): when ``in_contact`` is 0, no contact. Otherwise, when a
+    bubble input fires, the contact points are the firing bubbles' points (the CPF is skipped
+    and its particles dropped). Otherwise the CPF isolates one point from ``ee_wrench``
+    (rotated into ``gripper_frame``), reusing its particles while the contact lasts when
+    ``reuse_particles`` is on; a wrench force below ``min_force`` (N) is too weak to isolate and
+    gives no contact. Draws come from numpy Generators keyed by (``seed``, update count).
+
+    Args:
+        time_step: update period (s).
+        seed: the CPF's random seed (also seeds the surface sampling unless ``samples`` given).
+        samples: (points, normals) in ``gripper_frame``; default :func:`sample_gripper_surface`
+            with ``spacing`` and ``opening``.
+        n_bubbles: number of bubble sensors wired in (0: CPF only; the ports are then absent).
+        filter_kwargs: settings for :class:`~stucco_drake.core.contact_isolation.
+            ContactParticleFilter` (stds, particle counts, friction angle).
+
+    Input ports:
+        ee_wrench: (6,) [torque (N m); force (N)] on the gripper at the origin of
+            ``gripper_frame``, expressed in world (the wrench estimator's output).
+        gripper_pose: (7,) see the module's pose convention.
+        in_contact: (1,) detection flag (> 0.5 means contact).
+        bubble_in_contact: (n_bubbles,) flags, only with n_bubbles > 0.
+        bubble_contact_points: (3 n_bubbles,) world points (m), only with n_bubbles > 0.
+
+    Output ports (from state; no direct feedthrough):
+        has_contact: (1,) 1.0 when this step produced a contact point.
+        contact_point: (3,) the (first) contact point in world (m); zeros without contact.
+        contact_point_gripper: (3,) the same point in ``gripper_frame`` (m).
+        isolation_cost: (1,) CPF torque residual (N m); 0 for bubble points.
+        contact_source: (1,) 0 none, 1 CPF, 2 bubble.
+        contact_points: abstract list of (3,) world points (m), all points of this step.
+    """
+
+    def __init__(self, time_step: float, *, seed: int, samples=None, spacing: float = 0.004,
+                 opening: float = 0.03, n_bubbles: int = 0, min_force: float = 1.0,
+                 reuse_particles: bool = True, filter_kwargs: dict | None = None):  # fmt: skip
+        super().__init__()
+        if not (np.isfinite(time_step) and time_step > 0):
+            raise ValueError(f"ContactIsolator: time_step must be > 0, got {time_step}")
+        self._seed = int(seed)
+        if samples is None:
+            samples = sample_gripper_surface(np.random.default_rng([self._seed, 1]), spacing,
+                                             opening)  # fmt: skip
+        self.filter = ContactParticleFilter(*samples, **(filter_kwargs or {}))
+        self._min_force = float(min_force)
+        self._reuse = bool(reuse_particles)
+        self._n_bubbles = int(n_bubbles)
+        self._wrench = self.DeclareVectorInputPort("ee_wrench", 6)
+        self._pose = self.DeclareVectorInputPort("gripper_pose", 7)
+        self._flag = self.DeclareVectorInputPort("in_contact", 1)
+        if self._n_bubbles:
+            self._bubble_flags = self.DeclareVectorInputPort("bubble_in_contact", n_bubbles)
+            self._bubble_points = self.DeclareVectorInputPort(
+                "bubble_contact_points", 3 * n_bubbles
+            )
+        self._state = self.DeclareAbstractState(AbstractValue.Make(_IsolatorState()))
+        ticket = {self.abstract_state_ticket(self._state)}
+        for name, size, get in (
+            ("has_contact", 1, lambda s: [float(s.source != SOURCE_NONE)]),
+            ("contact_point", 3, lambda s: s.point_W),
+            ("contact_point_gripper", 3, lambda s: s.point_G),
+            ("isolation_cost", 1, lambda s: [s.cost]),
+            ("contact_source", 1, lambda s: [s.source]),
+        ):
+            self.DeclareVectorOutputPort(name, size, self._make_output(get),
+                                         prerequisites_of_calc=ticket)  # fmt: skip
+        self.DeclareAbstractOutputPort(
+            "contact_points",
+            lambda: AbstractValue.Make([np.zeros(3)]),
+            lambda c, o: o.set_value(list(self._get(c).points_W)),
+            prerequisites_of_calc=ticket,
+        )
+        self.DeclarePeriodicUnrestrictedUpdateEvent(time_step, 0.0, self._update)
+
+    def _get(self, context) -> _IsolatorState:
+        return context.get_abstract_state(self._state).get_value()
+
+    def _make_output(self, get):
+        def calc(context, output):
+            output.SetFromVector(np.asarray(get(self._get(context)), dtype=float))
+
+        return calc
+
+    def _read(self, context, port) -> np.ndarray:
+        value = port.Eval(context)
+        if not np.all(np.isfinite(value)):
+            raise ValueError(
+                f"ContactIsolator input port '{port.get_name()}' has a NaN or infinite entry "
+                f"at t={context.get_time():.6g} s"
+            )
+        return value
+
+    def _update(self, context, state):
+        old = self._get(context)
+        step = old.step + 1
+        new = _IsolatorState(step=step)
+        wrench = self._read(context, self._wrench)
+        X_WG = pose_from_vector(self._read(context, self._pose))
+        flag = self._read(context, self._flag)[0] > 0.5
+        if flag and self._n_bubbles:
+            flags = self._read(context, self._bubble_flags) > 0.5
+            points = self._read(context, self._bubble_points).reshape(-1, 3)
+            if flags.any():
+                first = points[np.argmax(flags)]
+                new = dataclasses.replace(
+                    new, point_W=first.copy(), point_G=X_WG.inverse().multiply(first),
+                    points_W=tuple(p.copy() for p in points[flags]), source=SOURCE_BUBBLE,
+                )  # fmt: skip
+                flag = False  # bubbles answered: no CPF
+        if flag:
+            R_GW = X_WG.rotation().inverse()
+            torque, force = R_GW.multiply(wrench[:3]), R_GW.multiply(wrench[3:])
+            if np.linalg.norm(force) >= self._min_force:
+                rng = np.random.default_rng([self._seed, step])
+                previous = old.particles if (self._reuse and old.source == SOURCE_CPF) else None
+                result, particles = self.filter.step(torque, force, rng, previous)
+                if np.isfinite(result.cost):
+                    point_W = X_WG.multiply(result.point)
+                    new = dataclasses.replace(
+                        new, particles=particles, point_W=point_W, point_G=result.point,
+                        points_W=(point_W,), cost=result.cost, source=SOURCE_CPF,
+                    )  # fmt: skip
+        state.get_mutable_abstract_state(self._state).set_value(new)
+
+
+__all__ = [
+    "SOURCE_BUBBLE",
+    "SOURCE_CPF",
+    "SOURCE_NONE",
+    "ContactIsolator",
+    "GripperPoseFromState",
+    "gripper_collision_shapes",
+    "pose_from_vector",
+    "pose_vector",
+    "sample_gripper_surface",
+]

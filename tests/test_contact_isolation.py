@@ -1,0 +1,313 @@
+"""Contact isolation: the CPF on estimated wrenches, the bubble sensor, and their combination.
+
+The CPF rig is the contact detector's rig (robot alone, welded base, held at Q_NOMINAL by its
+InverseDynamicsController), pushed by known forces at known points of the gripper surface
+through the plant's applied_spatial_force input; the isolator sees only the wrench estimator's
+output, the detector's flag and the forward-kinematics pose.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import AddRigidHydroelasticProperties, Box, ProximityProperties
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    CoulombFriction,
+    ExternallyAppliedSpatialForce,
+    MultibodyPlantConfig,
+)
+from pydrake.multibody.tree import FixedOffsetFrame, PrismaticJoint
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
+from pydrake.trajectories import PiecewisePolynomial
+
+from stucco_drake.models import BUBBLE_GRIPPER_URL, configure_parser
+from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
+from stucco_drake.systems.contact_detector import (
+    FINGERS_NOMINAL,
+    Q_NOMINAL,
+    ContactDetector,
+    add_joint_controlled_robot,
+)
+from stucco_drake.systems.contact_isolator import (
+    SOURCE_BUBBLE,
+    SOURCE_CPF,
+    ContactIsolator,
+    GripperPoseFromState,
+    pose_from_vector,
+    pose_vector,
+    sample_gripper_surface,
+)
+
+H = 1e-3  # plant, estimator and detector period (s)
+ISO_H = 5e-3  # isolator period (s)
+PUSH, GAP = 0.25, 0.1  # push window and free gap (s)
+N_PUSHES = 20
+SETTLE = 0.1  # s after onset: five observer time constants
+P_GRIPPER = np.array([0.0, 0.0, 0.12])  # gripper_frame origin in the palm body frame (m)
+
+
+class PushSchedule(LeafSystem):
+    """Pushes the palm body with force f (world, N) at point p_B (palm frame, m) in each window."""
+
+    def __init__(self, body_index, windows):
+        super().__init__()
+        self._body, self._windows = body_index, windows
+        self.DeclareAbstractOutputPort(
+            "forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]), self._calc
+        )
+
+    def _calc(self, context, output):
+        applied = ExternallyAppliedSpatialForce()
+        applied.body_index = self._body
+        applied.F_Bq_W = SpatialForce(np.zeros(3), np.zeros(3))
+        for t0, t1, p_B, f_W in self._windows:
+            if t0 <= context.get_time() < t1:
+                applied.p_BoBq_B, applied.F_Bq_W = p_B, SpatialForce(np.zeros(3), f_W)
+        output.set_value([applied])
+
+
+def make_pushes(seed: int, R_WG: np.ndarray):
+    """Random points of the gripper's outer surface (a sampling independent of the isolator's),
+    each pushed 6-10 N within 30 degrees of its inward normal."""
+    rng = np.random.default_rng(seed)
+    points, normals = sample_gripper_surface(rng, spacing=0.01)
+    windows = []
+    for i, k in enumerate(rng.choice(len(points), N_PUSHES, replace=False)):
+        tilt = rng.normal(size=3)
+        tilt -= (tilt @ normals[k]) * normals[k]
+        angle = np.radians(rng.uniform(0, 30))
+        d = -np.cos(angle) * normals[k] + np.sin(angle) * tilt / np.linalg.norm(tilt)
+        f_G = d * rng.uniform(6.0, 10.0)
+        t0 = GAP + i * (PUSH + GAP)
+        windows.append((t0, t0 + PUSH, points[k] + P_GRIPPER, R_WG @ f_G))
+    return windows
+
+
+@pytest.fixture(scope="module")
+def cpf_run():
+    builder = DiagramBuilder()
+    duration = GAP + N_PUSHES * (PUSH + GAP)
+    q = np.r_[Q_NOMINAL, FINGERS_NOMINAL]
+    hold = PiecewisePolynomial.FirstOrderHold([0.0, duration], np.c_[q, q])
+    robot = add_joint_controlled_robot(builder, hold, time_step=H)
+    plant, est = robot.plant, robot.estimator
+    fk = builder.AddSystem(GripperPoseFromState(finger_positions=FINGERS_NOMINAL))
+    builder.Connect(plant.get_state_output_port(plant.GetModelInstanceByName("iiwa")),
+                    fk.get_input_port())  # fmt: skip
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, q)
+    R_WG = plant.GetFrameByName("gripper_frame").CalcPoseInWorld(context).rotation().matrix()
+    windows = make_pushes(21, R_WG)
+    pushes = builder.AddSystem(PushSchedule(plant.GetBodyByName("body").index(), windows))
+    builder.Connect(pushes.get_output_port(), plant.get_applied_spatial_force_input_port())
+    detector = builder.AddSystem(ContactDetector(H))
+    action = builder.AddSystem(ConstantVectorSource([0.0]))
+    builder.Connect(est.GetOutputPort("residual_chi2"), detector.GetInputPort("residual_chi2"))
+    builder.Connect(est.GetOutputPort("ee_position"), detector.GetInputPort("ee_position"))
+    builder.Connect(action.get_output_port(), detector.GetInputPort("action_index"))
+    logs = {}
+    for reuse in (True, False):
+        iso = builder.AddSystem(ContactIsolator(ISO_H, seed=3, reuse_particles=reuse))
+        builder.Connect(est.GetOutputPort("ee_wrench"), iso.GetInputPort("ee_wrench"))
+        builder.Connect(fk.get_output_port(), iso.GetInputPort("gripper_pose"))
+        builder.Connect(detector.GetOutputPort("in_contact"), iso.GetInputPort("in_contact"))
+        for name in ("contact_point_gripper", "contact_point", "has_contact"):
+            logs[reuse, name] = LogVectorOutput(iso.GetOutputPort(name), builder, ISO_H)
+    logs["pose"] = LogVectorOutput(fk.get_output_port(), builder, ISO_H)
+    simulator = Simulator(builder.Build())
+    robot.set_initial_configuration(simulator.get_mutable_context())
+    simulator.AdvanceTo(duration)
+    out = {"windows": windows}
+    for key, logger in logs.items():
+        log = logger.FindLog(simulator.get_context())
+        out["t"], out[key] = log.sample_times(), log.data().T
+    return out
+
+
+def push_errors(run, reuse: bool, frame: str = "gripper"):
+    """Per push, the isolation errors (m) over its steady part."""
+    t, errors = run["t"], []
+    for t0, t1, p_B, _ in run["windows"]:
+        m = (t >= t0 + SETTLE) & (t < t1)
+        if frame == "gripper":
+            estimate, truth = run[reuse, "contact_point_gripper"][m], (p_B - P_GRIPPER)[None]
+        else:
+            estimate = run[reuse, "contact_point"][m]
+            truth = np.array([pose_from_vector(x).multiply(p_B - P_GRIPPER)
+                              for x in run["pose"][m]])  # fmt: skip
+        assert np.all(run[reuse, "has_contact"][m] == 1.0)
+        errors.append(np.linalg.norm(estimate - truth, axis=1))
+    return errors
+
+
+def test_cpf_isolates_known_pushes(cpf_run):
+    for reuse in (True, False):
+        errors = push_errors(cpf_run, reuse)
+        per_push = np.array([np.median(e) for e in errors])
+        flat = np.concatenate(errors)
+        print(f"reuse={reuse}: median {1e3 * np.median(flat):.2f} mm, 90th pct "
+              f"{1e3 * np.quantile(flat, 0.9):.1f} mm; per-push medians (mm) "
+              f"{np.round(1e3 * per_push, 1).tolist()}")  # fmt: skip
+        assert np.median(flat) <= 0.010
+    world = np.concatenate(push_errors(cpf_run, True, frame="world"))
+    print(f"world frame: median {1e3 * np.median(world):.2f} mm")
+    assert np.median(world) <= 0.010
+
+
+def test_no_force_no_contact(cpf_run):
+    t = cpf_run["t"]
+    free = t < GAP - 2 * ISO_H
+    for _, t1, _, _ in cpf_run["windows"]:
+        # The observer's residual decays with a 20 ms time constant after the push ends.
+        free |= (t >= t1 + 0.06) & (t < t1 + GAP)
+    assert free.sum() > 100
+    for reuse in (True, False):
+        assert np.all(cpf_run[reuse, "has_contact"][free] == 0.0)
+
+
+# ------------------------------------------------------------------------------ bubble sensor
+def bubble_scene(yaw_deg: float, press: float, gap: float = 0.001):
+    """Gripper on a damped x slide (no gravity, fingers locked at 0.03 m) pressing its right
+    bubble with ``press`` N against a welded rigid box standing between the fingers, the box
+    yawed by ``yaw_deg``, the bubble starting ``gap`` m from it. Returns the simulated pieces
+    after 0.4 s."""
+    builder = DiagramBuilder()
+    config = MultibodyPlantConfig(time_step=1e-3, discrete_contact_approximation="sap",
+                                  contact_model="hydroelastic_with_fallback")  # fmt: skip
+    plant, scene_graph = AddMultibodyPlant(config, builder)
+    plant.mutable_gravity_field().set_gravity_vector(np.zeros(3))
+    (gripper,) = configure_parser(Parser(plant)).AddModels(url=BUBBLE_GRIPPER_URL)
+    origin = plant.AddFrame(FixedOffsetFrame("slide_origin", plant.world_frame(),
+                                             RigidTransform([gap - 0.02, 0, 0])))  # fmt: skip
+    slide = plant.AddJoint(PrismaticJoint("slide", origin, plant.GetFrameByName("body", gripper),
+                                          [1.0, 0.0, 0.0], damping=200.0))  # fmt: skip
+    motor = plant.AddJointActuator("slide_motor", slide)
+    X_WBox = RigidTransform(RollPitchYaw(0, 0, np.radians(yaw_deg)), [0.0, 0.0, 0.185])
+    props = ProximityProperties()
+    AddRigidHydroelasticProperties(0.005, props)
+    props.AddProperty("material", "coulomb_friction", CoulombFriction(0.5, 0.5))
+    size = np.array([0.02, 0.2, 0.23])
+    plant.RegisterCollisionGeometry(plant.world_body(), X_WBox, Box(*size), "box", props)
+    plant.Finalize()
+    sensor = builder.AddSystem(BubbleContactSensor(plant, scene_graph, 1e-3))
+    builder.Connect(plant.get_contact_results_output_port(), sensor.GetInputPort("contact_results"))
+    builder.Connect(plant.get_body_poses_output_port(), sensor.GetInputPort("body_poses"))
+    u = np.zeros(plant.num_actuators())
+    u[motor.input_start()] = -press
+    builder.Connect(builder.AddSystem(ConstantVectorSource(u)).get_output_port(),
+                    plant.get_actuation_input_port())  # fmt: skip
+    simulator = Simulator(builder.Build())
+    plant_context = plant.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    for name in ("left_finger_joint", "right_finger_joint"):
+        joint = plant.GetJointByName(name, gripper)
+        joint.set_translation(plant_context, 0.03)
+        joint.Lock(plant_context)
+    simulator.AdvanceTo(0.4)
+    return plant, sensor, simulator, X_WBox, size
+
+
+def true_bubble_contact(plant, context, X_WBox, size):
+    """Deepest point of the undeformed right bubble beyond the box's +x face, projected onto the
+    face: where the first touch happened and, for a small dent, the dent's centre (world, m)."""
+    n = X_WBox.rotation().matrix()[:, 0]
+    p_face = X_WBox.translation() + 0.5 * size[0] * n
+    X_WF = plant.GetBodyByName("right_finger").EvalPoseInWorld(context)
+    X_WE = X_WF.multiply(RigidTransform([0.02, 0.0, 0.06]))
+    radii = np.array([0.02, 0.04, 0.055])
+    d = X_WE.rotation().inverse().multiply(-n)
+    support = X_WE.multiply(radii**2 * d / np.sqrt(d @ (radii**2 * d)))
+    return support - ((support - p_face) @ n) * n
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 12.0])
+def test_bubble_point_matches_true_contact(yaw_deg):
+    plant, sensor, simulator, X_WBox, size = bubble_scene(yaw_deg, press=10.0)
+    root = simulator.get_context()
+    sensor_context = sensor.GetMyContextFromRoot(root)
+    flags = sensor.GetOutputPort("bubble_in_contact").Eval(sensor_context)
+    points = sensor.GetOutputPort("bubble_contact_points").Eval(sensor_context).reshape(-1, 3)
+    depth = sensor.GetOutputPort("bubble_penetration").Eval(sensor_context)
+    assert sensor.bubble_names == ["left_finger", "right_finger"]
+    assert flags.tolist() == [0.0, 1.0]
+    truth = true_bubble_contact(plant, plant.GetMyContextFromRoot(root), X_WBox, size)
+    results = plant.get_contact_results_output_port().Eval(plant.GetMyContextFromRoot(root))
+    drake_centroid = results.hydroelastic_contact_info(0).contact_surface().centroid()
+    error = np.linalg.norm(points[1] - truth)
+    print(f"yaw {yaw_deg}: penetration {1e3 * depth[1]:.2f} mm, bubble point error "
+          f"{1e3 * error:.2f} mm, vs Drake's area centroid "
+          f"{1e3 * np.linalg.norm(points[1] - drake_centroid):.2f} mm")  # fmt: skip
+    assert error <= 0.003
+
+
+def test_light_touch_does_not_fire():
+    """0.5 N dents the bubble by about 0.5 mm: in contact, below the 1 mm threshold."""
+    _, sensor, simulator, _, _ = bubble_scene(0.0, press=0.5, gap=0.0)
+    context = sensor.GetMyContextFromRoot(simulator.get_context())
+    depth = sensor.GetOutputPort("bubble_penetration").Eval(context)
+    print(f"light touch: penetration {1e3 * depth[1]:.2f} mm")
+    assert 0.0 < depth[1] < 1e-3
+    assert sensor.GetOutputPort("bubble_in_contact").Eval(context).tolist() == [0.0, 0.0]
+
+
+# --------------------------------------------------------------------- isolator, standalone
+def run_isolator(wrench, *, flag=1.0, bubbles=None, steps=3, pose=None):
+    iso = ContactIsolator(ISO_H, seed=0, n_bubbles=0 if bubbles is None else 2)
+    builder = DiagramBuilder()
+    builder.AddSystem(iso)
+    simulator = Simulator(builder.Build())
+    context = iso.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    iso.GetInputPort("ee_wrench").FixValue(context, wrench)
+    iso.GetInputPort("gripper_pose").FixValue(context, pose_vector(pose or RigidTransform()))
+    iso.GetInputPort("in_contact").FixValue(context, [flag])
+    if bubbles is not None:
+        iso.GetInputPort("bubble_in_contact").FixValue(context, bubbles[0])
+        iso.GetInputPort("bubble_contact_points").FixValue(context, bubbles[1])
+    simulator.AdvanceTo(steps * ISO_H)
+    return {p: iso.GetOutputPort(p).Eval(context)
+            for p in ("has_contact", "contact_point", "contact_source")}  # fmt: skip
+
+
+def test_isolator_prefers_bubbles_and_falls_back_to_cpf():
+    # 8 N into the right bubble's +y side (a line of action that meets no other part),
+    # gripper yawed and shifted.
+    X_WG = RigidTransform(RollPitchYaw(0.0, 0.0, 0.7), [0.5, -0.1, 0.3])
+    c_G = np.array([0.05, 0.04 * np.sqrt(1.0 - (0.02 / 0.055) ** 2), 0.02])
+    f_G = 8.0 * np.array([0.25, -0.93, -0.25]) / np.linalg.norm([0.25, -0.93, -0.25])
+    R = X_WG.rotation().matrix()
+    wrench = np.r_[R @ np.cross(c_G, f_G), R @ f_G]
+    cpf = run_isolator(wrench, bubbles=([0.0, 0.0], np.zeros(6)), pose=X_WG)
+    assert cpf["contact_source"][0] == SOURCE_CPF
+    assert np.linalg.norm(cpf["contact_point"] - X_WG.multiply(c_G)) < 0.005
+    bubble = run_isolator(wrench, bubbles=([0.0, 1.0], np.r_[np.zeros(3), 1.0, 2.0, 3.0]),
+                          pose=X_WG)  # fmt: skip
+    assert bubble["contact_source"][0] == SOURCE_BUBBLE
+    np.testing.assert_array_equal(bubble["contact_point"], [1.0, 2.0, 3.0])
+    none = run_isolator(wrench, flag=0.0, pose=X_WG)
+    assert none["has_contact"][0] == 0.0 and none["contact_source"][0] == 0.0
+
+
+@pytest.mark.parametrize("port", ["ee_wrench", "gripper_pose"])
+def test_non_finite_input_raises_naming_the_port(port):
+    wrench, pose = np.r_[0.0, 0.0, 0.1, 5.0, 0.0, 0.0], RigidTransform()
+    iso = ContactIsolator(ISO_H, seed=0)
+    builder = DiagramBuilder()
+    builder.AddSystem(iso)
+    simulator = Simulator(builder.Build())
+    context = iso.GetMyMutableContextFromRoot(simulator.get_mutable_context())
+    bad = np.r_[wrench[:2], np.nan, wrench[3:]] if port == "ee_wrench" else wrench
+    iso.GetInputPort("ee_wrench").FixValue(context, bad)
+    pose_vec = pose_vector(pose)
+    if port == "gripper_pose":
+        pose_vec[4] = np.inf
+    iso.GetInputPort("gripper_pose").FixValue(context, pose_vec)
+    iso.GetInputPort("in_contact").FixValue(context, [1.0])
+    with pytest.raises(ValueError, match=f"input port '{port}'") as info:
+        simulator.AdvanceTo(2 * ISO_H)
+    assert "\n" not in str(info.value)
