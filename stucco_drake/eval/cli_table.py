@@ -1,0 +1,165 @@
+"""The ``stucco-drake table`` subcommand: Table II and its FMI/CE figure, resumably.
+
+Each episode (scene, seed) is simulated once into ``OUT/logs/<scene>_<seed>.npz`` and
+replayed by every method; every finished run is appended to ``OUT/runs.csv``; ``OUT/table.md``
+and ``OUT/fmi_ce.png`` are written from all recorded runs of the requested table. Rerunning
+the same command skips what is done.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import functools
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from stucco_drake.core.baselines import TRACKER_NAMES
+from stucco_drake.eval.episode_log import EpisodeLog
+from stucco_drake.eval.replay import replay
+from stucco_drake.eval.results import RunResults, row_key
+from stucco_drake.eval.runner import Progress, RunInterrupted, make_executor, run_table
+from stucco_drake.eval.synthetic_episode import synthetic_episode
+from stucco_drake.eval.table import plot_fmi_ce, write_table
+
+#: Scene name -> producer(scene, seed) -> EpisodeLog. The Drake scenes plug in here.
+SCENE_PRODUCERS: dict[str, Callable[[str, int], EpisodeLog]] = {
+    "SYN2": synthetic_episode,
+    "SYNC": synthetic_episode,
+}
+
+
+def check_names(scenes: Sequence[str], methods: Sequence[str]) -> None:
+    """ValueError naming every unknown scene and method."""
+    problems = []
+    bad_scenes = [s for s in scenes if s not in SCENE_PRODUCERS]
+    bad_methods = [m for m in methods if m not in TRACKER_NAMES]
+    if bad_scenes:
+        problems.append(f"unknown scene(s) {', '.join(map(repr, bad_scenes))} "
+                        f"(known: {', '.join(SCENE_PRODUCERS)})")
+    if bad_methods:
+        problems.append(f"unknown method(s) {', '.join(map(repr, bad_methods))} "
+                        f"(known: {', '.join(TRACKER_NAMES)})")
+    if problems:
+        raise ValueError("; ".join(problems))
+
+
+def episode_path(out: Path, scene: str, seed: int) -> Path:
+    return Path(out) / "logs" / f"{scene}_{seed}.npz"
+
+
+def produce_episode(episode: tuple[str, int], out: str) -> str:
+    """Simulate one episode and save its log (runs in a worker); returns its path."""
+    scene, seed = episode
+    path = episode_path(Path(out), scene, seed)
+    SCENE_PRODUCERS[scene](scene, seed).save(path)
+    return str(path)
+
+
+def replay_cached(task: tuple[str, int, str], out: str) -> dict:
+    """One run (scene, seed, method) replayed from its cached log (runs in a worker)."""
+    scene, seed, method = task
+    log = EpisodeLog.load(episode_path(Path(out), scene, seed))
+    if (log.scene, log.seed) != (scene, seed):
+        raise ValueError(f"log of {scene}_{seed} holds episode {log.scene}_{log.seed}")
+    return replay(log, method)
+
+
+def _simulate_missing(episodes, out: Path, executor: cf.Executor, progress) -> None:
+    """Simulate the episodes whose logs are not cached yet, in parallel."""
+    missing = [e for e in episodes if not episode_path(out, *e).exists()]
+    if not missing:
+        return
+    bar = Progress(len(missing), "episodes", stream=progress)
+    futures = {executor.submit(produce_episode, e, str(out)): e for e in missing}
+    errors = []
+    try:
+        for future in cf.as_completed(futures):
+            try:
+                future.result()
+                bar.advance()
+            except Exception as error:  # collect, so every finished log is kept
+                errors.append((futures[future], error))
+    finally:
+        bar.close()
+    if errors:
+        (scene, seed), error = errors[0]
+        raise RunInterrupted(
+            f"simulating {scene}_{seed} failed ({type(error).__name__}: "
+            f"{str(error).splitlines()[0] if str(error) else ''}); {len(errors)} episode(s) "
+            f"missing: rerun the same command to resume"
+        ) from error
+
+
+def make_table(
+    scenes: Sequence[str],
+    methods: Sequence[str],
+    runs: int,
+    out,
+    executor: cf.Executor,
+    progress=None,
+) -> list[dict]:
+    """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
+
+    Returns the table's rows (from ``OUT/runs.csv``, including runs of earlier calls).
+    """
+    check_names(scenes, methods)
+    if runs < 1:
+        raise ValueError(f"runs must be positive, got {runs}")
+    out = Path(out)
+    episodes = [(scene, seed) for scene in scenes for seed in range(runs)]
+    _simulate_missing(episodes, out, executor, progress)
+    tasks = [(scene, seed, method) for scene, seed in episodes for method in methods]
+    results = RunResults(out / "runs.csv")
+    run_table(tasks, functools.partial(replay_cached, out=str(out)), results, executor, progress)
+    wanted = set(tasks)
+    rows = [row for row in results.rows() if row_key(row) in wanted]
+    write_table(rows, scenes, methods, out / "table.md")
+    plot_fmi_ce(rows, out / "fmi_ce.png", scenes, methods)
+    return rows
+
+
+def add_table_command(subparsers) -> None:
+    """Adds ``table`` to the CLI's subparsers."""
+    table = subparsers.add_parser(
+        "table", help="replay every method on logged episodes; write Table II and Fig. 5"
+    )
+    table.add_argument("--runs", type=int, default=20, help="seeds 0..RUNS-1 per scene")
+    table.add_argument("--scenes", nargs="+", required=True,
+                       help=f"scene names ({', '.join(SCENE_PRODUCERS)})")
+    table.add_argument("--methods", nargs="+", default=list(TRACKER_NAMES),
+                       help=f"tracking methods (default: {' '.join(TRACKER_NAMES)})")
+    table.add_argument("--out", required=True, help="output folder (logs, runs.csv, table)")
+    table.add_argument("--workers", type=int, default=None,
+                       help="parallel workers (default: one per CPU)")
+    table.add_argument("--executor", choices=("process", "dask"), default="process",
+                       help="local process pool, or a Dask cluster")
+    table.add_argument("--scheduler", default=None,
+                       help="Dask scheduler address (default: start a local cluster)")
+    table.set_defaults(run=run_table_command)
+
+
+def run_table_command(args: argparse.Namespace) -> int:
+    """Handler of ``stucco-drake table``: 0 done, 1 interrupted (rerun resumes), 2 bad input."""
+    try:
+        check_names(args.scenes, args.methods)
+        if args.scheduler is not None and args.executor != "dask":
+            raise ValueError("--scheduler needs --executor dask")
+        executor = make_executor(args.executor, args.workers, args.scheduler)
+    except (ValueError, RuntimeError) as error:
+        print(f"stucco-drake table: error: {error}", file=sys.stderr)
+        return 2
+    try:
+        with executor:
+            rows = make_table(args.scenes, args.methods, args.runs, args.out, executor)
+    except RunInterrupted as error:
+        print(f"stucco-drake table: {error}", file=sys.stderr)
+        return 1
+    except ValueError as error:
+        print(f"stucco-drake table: error: {error}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    print((out / "table.md").read_text(encoding="utf-8"), end="")
+    print(f"{len(rows)} runs in {out / 'runs.csv'}; figure {out / 'fmi_ce.png'}")
+    return 0

@@ -1,0 +1,197 @@
+"""Table II machinery: episode logs, replay by every method, resumable runs, table and figure."""
+
+import argparse
+import concurrent.futures as cf
+import dataclasses
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stucco_drake.core.baselines import TRACKER_NAMES
+from stucco_drake.eval import (
+    EpisodeLog,
+    RunInterrupted,
+    RunResults,
+    make_executor,
+    replay,
+    run_table,
+    synthetic_episode,
+)
+from stucco_drake.eval.cli_table import add_table_command, check_names, make_table
+
+ROW_KEYS = ("scene", "seed", "method")
+
+
+def fake_row(task, ce=1.5):
+    scene, seed, method = task
+    return {
+        "scene": scene, "seed": seed, "method": method, "grasp_success": None, "ce_cm": ce,
+        "fmi": 0.5, "ambiguity": float("nan"), "n_contacts": 3, "wall_time_s": 0.01,
+    }
+
+
+def dying_run(task, marker):
+    """A run that kills its worker process on task ('A', 1, 'y') the first time only."""
+    if task == ("A", 1, "y") and not os.path.exists(marker):
+        Path(marker).touch()
+        os._exit(3)
+    time.sleep(0.05)
+    return fake_row(task)
+
+
+def quick_run(task):
+    return fake_row(task)
+
+
+@pytest.fixture(scope="module")
+def syn2_log(tmp_path_factory):
+    path = tmp_path_factory.mktemp("logs") / "SYN2_0.npz"
+    synthetic_episode("SYN2", 0).save(path)
+    return EpisodeLog.load(path)
+
+
+def test_every_method_replays_a_logged_episode_with_finite_metrics(syn2_log):
+    assert syn2_log.n_contacts > 10 and syn2_log.n_actions > 100
+    assert syn2_log.action_noise == 5e-4
+    for method in TRACKER_NAMES:
+        row = replay(syn2_log, method, grasp=lambda log, tracker: tracker.n_contacts > 0)
+        assert row["n_contacts"] == syn2_log.n_contacts, method
+        assert np.isfinite([row["ce_cm"], row["fmi"], row["ambiguity"]]).all(), method
+        assert 0.0 <= row["fmi"] <= 1.0 and row["grasp_success"] is True, method
+    assert replay(syn2_log, "stucco")["grasp_success"] is None
+    # Without logged robot-object distances the ambiguity is undefined.
+    k = len(syn2_log.object_names)
+    blind = dataclasses.replace(syn2_log, robot_object_distance=np.zeros((0, k)))
+    assert np.isnan(replay(blind, "dbscan")["ambiguity"])
+
+
+def test_same_seed_gives_identical_rows_and_the_seed_perturbs_the_actions():
+    first, second = synthetic_episode("SYNC", 3), synthetic_episode("SYNC", 3)
+    other = synthetic_episode("SYNC", 4)
+    np.testing.assert_array_equal(first.ee_position, second.ee_position)
+    step = np.abs(first.ee_position - other.ee_position).max()
+    assert 0.0 < step < 0.02  # noise of +-0.5 mm per action, accumulated
+    for method in ("stucco", "kmeans", "gmphd"):
+        rows = [replay(log, method) for log in (first, second)]
+        for row in rows:
+            row.pop("wall_time_s")
+        assert rows[0] == rows[1], method
+
+
+def test_wrong_version_and_malformed_logs_give_one_line_errors(syn2_log, tmp_path):
+    good = tmp_path / "good.npz"
+    syn2_log.save(good)
+    with np.load(good) as data:
+        arrays = dict(data)
+    np.savez(tmp_path / "v2.npz", **{**arrays, "format_version": np.int64(2)})
+    del arrays["contact_dx"]
+    np.savez(tmp_path / "missing.npz", **arrays)
+    (tmp_path / "junk.npz").write_bytes(b"not a zip file")
+    cases = {"v2.npz": "format version 2", "missing.npz": "not a valid episode log",
+             "junk.npz": "not a valid episode log", "absent.npz": "not a valid episode log"}
+    for name, message in cases.items():
+        with pytest.raises(ValueError, match=message) as error:
+            EpisodeLog.load(tmp_path / name)
+        assert "\n" not in str(error.value) and name in str(error.value)
+
+
+def test_truncated_last_line_is_ignored_and_repaired(tmp_path):
+    results = RunResults(tmp_path / "runs.csv")
+    assert results.append(fake_row(("S", 0, "m")))
+    assert results.append(fake_row(("S", 1, "m")))
+    with open(results.path, "ab") as file:
+        file.write(b"S,2,m,,0.3")  # a crash mid-write
+    fresh = RunResults(results.path)
+    assert len(fresh.rows()) == 2 and ("S", 2, "m") not in fresh.done()
+    assert fresh.append(fake_row(("S", 2, "m"), ce=float("nan")))
+    assert not fresh.append(fake_row(("S", 0, "m")))  # duplicate: not written
+    lines = results.path.read_text().splitlines()
+    assert len(lines) == 4 and lines[0].startswith("scene,seed,method,grasp_success")
+    rows = RunResults(results.path).rows()
+    assert [r["seed"] for r in rows] == [0, 1, 2] and np.isnan(rows[2]["ce_cm"])
+    assert rows[0]["grasp_success"] is None and rows[0]["ce_cm"] == 1.5
+
+
+def test_a_dead_worker_is_reported_and_a_rerun_completes_the_table(tmp_path):
+    import functools
+
+    tasks = [(s, seed, m) for s in ("A", "B") for seed in range(3) for m in ("x", "y")]
+    results = RunResults(tmp_path / "runs.csv")
+    run = functools.partial(dying_run, marker=str(tmp_path / "died"))
+    with make_executor("process", workers=2) as executor:
+        with pytest.raises(RunInterrupted, match="rerun the same command") as error:
+            run_table(tasks, run, results, executor, progress=False)
+    assert isinstance(error.value.__cause__, cf.process.BrokenProcessPool)
+    assert ("A", 1, "y") not in results.done() and len(results.done()) < len(tasks)
+    with make_executor("process", workers=2) as executor:
+        run_table(tasks, run, results, executor, progress=False)
+    lines = results.path.read_text().splitlines()[1:]
+    keys = [tuple(line.split(",")[:3]) for line in lines]
+    assert len(keys) == len(set(keys)) == len(tasks)
+    assert {(s, int(seed), m) for s, seed, m in keys} == set(tasks)
+
+
+def test_small_table_writes_layout_and_figure_and_resumes(tmp_path):
+    scenes, methods = ("SYN2", "SYNC"), ("stucco", "dbscan")
+    with make_executor("process", workers=2) as executor:
+        rows = make_table(scenes, methods, 2, tmp_path, executor, progress=False)
+    assert len(rows) == 8 and all(np.isfinite(r["ce_cm"]) for r in rows)
+    table = (tmp_path / "table.md").read_text().splitlines()
+    header = [c.strip() for c in table[0].strip("|").split("|")]
+    assert header == ["method", "SYN2 GS %", "SYN2 FMI", "SYN2 CE cm",
+                      "SYNC GS %", "SYNC FMI", "SYNC CE cm"]
+    assert table[2].startswith("| ours (STUCCO) |") and table[3].startswith("| DBSCAN |")
+    assert all(len(line.strip("|").split("|")) == 7 for line in table[2:4])
+    assert "n/a" in table[2]  # no grasp check given: GS is empty
+    from matplotlib.image import imread
+
+    image = imread(tmp_path / "fmi_ce.png")
+    assert image.shape[1] > image.shape[0]  # two scene columns, two rows (all, ambiguous)
+    logs = sorted(p.name for p in (tmp_path / "logs").iterdir())
+    assert logs == ["SYN2_0.npz", "SYN2_1.npz", "SYNC_0.npz", "SYNC_1.npz"]
+    stamp = (tmp_path / "logs" / "SYNC_1.npz").stat().st_mtime_ns
+    with cf.ThreadPoolExecutor(2) as executor:  # everything is done: nothing re-simulated
+        again = make_table(scenes, methods, 2, tmp_path, executor, progress=False)
+    assert again == rows and (tmp_path / "logs" / "SYNC_1.npz").stat().st_mtime_ns == stamp
+
+
+def test_bad_names_raise_naming_them(capsys, tmp_path):
+    with pytest.raises(ValueError, match=r"'FOO'.*'optics'") as error:
+        check_names(["SYN2", "FOO"], ["stucco", "optics"])
+    assert "\n" not in str(error.value)
+    parser = argparse.ArgumentParser()
+    add_table_command(parser.add_subparsers())
+    args = parser.parse_args(["table", "--scenes", "SYNX", "--out", str(tmp_path)])
+    assert args.run(args) == 2
+    err = capsys.readouterr().err
+    assert "'SYNX'" in err and err.count("\n") == 1
+    with pytest.raises(ValueError, match="'spark'"):
+        make_executor("spark")
+
+
+def test_dask_missing_gives_install_hint(monkeypatch):
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # import fails as if absent
+    with pytest.raises(RuntimeError, match=r"pip install 'stucco_drake\[dask\]'"):
+        make_executor("dask")
+
+
+def test_dask_executor_runs_the_table_on_a_loopback_cluster(tmp_path):
+    distributed = pytest.importorskip("dask.distributed", reason="dask not installed")
+    with distributed.LocalCluster(
+        processes=False, n_workers=1, threads_per_worker=2, protocol="tcp://", host="127.0.0.1",
+        dashboard_address=None,
+    ) as cluster, distributed.Client(cluster) as client:
+        tasks = [("A", seed, "x") for seed in range(4)]
+        results = RunResults(tmp_path / "runs.csv")
+        assert run_table(tasks, quick_run, results, client.get_executor(), progress=False) == 4
+        assert results.done() == set(tasks)
+
+
+def test_the_package_imports_no_pydrake():
+    code = "import sys, stucco_drake.eval.cli_table; assert 'pydrake' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True)
