@@ -8,6 +8,9 @@ import time
 
 import numpy as np
 
+from stucco_drake.eval.cli_table import add_table_command
+from stucco_drake.scenes.cli_sim import add_sim_command
+
 
 def _demo(args: argparse.Namespace) -> int:
     """Track the built-in synthetic key case with STUCCO and with hard clustering; print both."""
@@ -54,6 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo = commands.add_parser("demo", help="run the synthetic key-case demo and print metrics")
     demo.add_argument("--seed", type=int, default=0, help="seed of the tracker's generator")
     demo.set_defaults(run=_demo)
+    add_sim_command(commands)
+    add_table_command(commands)
     return parser
 
 

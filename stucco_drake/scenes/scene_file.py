@@ -1,0 +1,352 @@
+"""Scene files: the typed schema of ``diagrams/<name>.yaml`` and its loader.
+
+A scene file describes one simulated rummaging scene: the objects (Drake model directives, plus
+inline primitive boxes and cylinders), the retrieval target, where the robot stands, where the
+gripper starts, the prescribed planar action sequence, the plant configuration, the joint-level
+control gains and the tracker parameters. It is read with pydrake's ``yaml_load_typed`` into
+:class:`SceneFile`; every error is re-raised as one :class:`SceneFileError` line naming the file
+and the offending key.
+
+Units: metres, radians, seconds, kilograms. Poses are in the world frame (z up, the table top at
+z = 0).
+"""
+
+# No "from __future__ import annotations": yaml_load_typed reads the fields' real types.
+import dataclasses
+import math
+from pathlib import Path
+
+import yaml
+from pydrake.common.yaml import yaml_load_typed
+from pydrake.multibody.parsing import ModelDirective
+from pydrake.multibody.plant import MultibodyPlantConfig
+
+from stucco_drake.core import SoftTrackingParams
+
+#: Folder of the shipped scene files, one ``<name>.yaml`` per scene.
+DIAGRAMS_DIR = Path(__file__).resolve().parents[2] / "diagrams"
+
+
+_CONTACT_MODELS = ("hydroelastic_with_fallback", "hydroelastic", "point")
+_APPROXIMATIONS = ("sap", "lagged", "similar", "tamsi")
+_SURFACES = ("polygon", "triangle")
+
+
+class SceneFileError(ValueError):
+    """A scene file could not be read; the message is one line: ``<file>: <key>: <reason>``."""
+
+
+@dataclasses.dataclass
+class Primitive:
+    """A box or cylinder written inline in the scene file (training scenes, odd-sized walls).
+
+    Attributes:
+        name: model instance name (unique in the scene).
+        shape: "box" or "cylinder" (the cylinder's axis is along the body's z).
+        size: box: full extents [x, y, z]; cylinder: [radius, length] (m).
+        xyz: position of the body's centre in the world frame (m).
+        rpy: roll, pitch, yaw of the body in the world frame (rad).
+        mass: kg; ignored when ``welded``.
+        welded: weld to the world (an immovable wall) instead of a free body.
+        friction: Coulomb friction coefficient (static = dynamic).
+        rgba: colour of the visual.
+    """
+
+    name: str = ""
+    shape: str = "box"
+    size: list[float] = dataclasses.field(default_factory=list)
+    xyz: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    rpy: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    mass: float = 1.0
+    welded: bool = False
+    friction: float = 0.5
+    rgba: list[float] = dataclasses.field(default_factory=lambda: [0.5, 0.6, 0.8, 1.0])
+
+
+@dataclasses.dataclass
+class GripperStart:
+    """Where the gripper starts and the height/orientation it holds throughout.
+
+    Attributes:
+        xy: planar position of the gripper frame (the grasp centre) in the world frame (m).
+        height: z of the gripper frame above the table top (m), held during every action.
+        yaw: angle from world x to the gripper's closing axis, about world z (rad); the
+            gripper points straight down.
+        finger_position: each finger joint's position, held throughout (m).
+    """
+
+    xy: list[float] = dataclasses.field(default_factory=lambda: [0.0, 0.0])
+    height: float = 0.1
+    yaw: float = 0.5 * math.pi
+    finger_position: float = 0.0
+
+
+@dataclasses.dataclass
+class ControlParams:
+    """Joint-level and end-effector control.
+
+    Attributes:
+        kp, kd, ki: joint gains of the inverse-dynamics controller (1/s^2, 1/s, 1/s^3); they
+            multiply the mass matrix, so they act like a unit-mass PID on every joint.
+        ik_period: period of the differential-IK update (s).
+        ik_gain: pose-error feedback gain of the differential IK (1/s).
+        move_fraction: fraction of each action's duration spent moving; the rest settles.
+        max_step: per-axis clip of a planar step (m), the paper's 0.03.
+        nominal_q: a preferred arm posture (rad); turned about joint 1 to face the gripper's
+            start, it seeds the start IK. The IK's null-space pull then holds the arm near its
+            start posture.
+    """
+
+    kp: float = 2500.0
+    kd: float = 100.0
+    ki: float = 10.0
+    ik_period: float = 0.01
+    ik_gain: float = 20.0
+    move_fraction: float = 0.7
+    max_step: float = 0.03
+    nominal_q: list[float] = dataclasses.field(
+        # The IK solution with the gripper at the middle of the BOR scenes, from the
+        # default base pose: a posture with the elbow up and well inside the joint limits.
+        default_factory=lambda: [0.13, 1.6, 0.0, -1.53, 0.85, 0.01, 0.85]
+    )
+
+
+@dataclasses.dataclass
+class SceneFile:
+    """One scene (see the module docstring for units and frames).
+
+    Attributes:
+        name: the scene's short name (FB, BC, ...).
+        description: free text.
+        robot_base: [x, y, z, yaw] of the iiwa's base link in the world (m, m, m, rad). With
+            z > 0 the base stands on a welded pedestal column from the table top up.
+        workspace: [x_min, x_max, y_min, y_max] box the gripper may be sent to (m); see
+            :meth:`in_workspace`, which also applies ``reach``.
+        reach: [r_min, r_max] horizontal distance from the robot base within which the arm can
+            hold the gripper's height and orientation (m); it depends on the base height.
+        gripper_start: see :class:`GripperStart`.
+        target: model instance name of the object to retrieve ("" for none).
+        directives: Drake model directives adding the table, walls and objects.
+        primitives: inline boxes and cylinders, see :class:`Primitive`.
+        actions: normalized planar actions [u_x, u_y], each clipped to [-1, 1] and scaled by
+            ``control.max_step`` into a step in metres along world x and y.
+        action_duration: simulated time per action (s).
+        plant: MultibodyPlant configuration (discrete time step, SAP, contact model).
+        control: see :class:`ControlParams`.
+        tracker_preset: "sim" or "real", the base of the tracker parameters.
+        tracker: overrides of :class:`~stucco_drake.core.SoftTrackingParams` fields.
+    """
+
+    name: str = ""
+    description: str = ""
+    robot_base: list[float] = dataclasses.field(default_factory=lambda: [-0.22, 0.0, 0.4, 0.0])
+    workspace: list[float] = dataclasses.field(default_factory=lambda: [-0.05, 0.42, -0.3, 0.3])
+    # Measured by IK for a base 0.4 m up (0.10-0.70 m), less a margin from the stretched arm.
+    reach: list[float] = dataclasses.field(default_factory=lambda: [0.15, 0.68])
+    gripper_start: GripperStart = dataclasses.field(default_factory=GripperStart)
+    target: str = ""
+    directives: list[ModelDirective] = dataclasses.field(default_factory=list)
+    primitives: list[Primitive] = dataclasses.field(default_factory=list)
+    actions: list[list[float]] = dataclasses.field(default_factory=list)
+    action_duration: float = 1.0
+    plant: MultibodyPlantConfig = dataclasses.field(
+        default_factory=lambda: MultibodyPlantConfig(
+            time_step=0.002,
+            discrete_contact_approximation="sap",
+            contact_model="hydroelastic_with_fallback",
+            use_sampled_output_ports=False,
+        )
+    )
+    control: ControlParams = dataclasses.field(default_factory=ControlParams)
+    tracker_preset: str = "sim"
+    tracker: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    def tracker_params(self) -> SoftTrackingParams:
+        """The tracker parameters: ``tracker`` overrides on top of ``tracker_preset``."""
+        return SoftTrackingParams.from_mapping(dict(self.tracker), preset=self.tracker_preset)
+
+    def in_workspace(self, xy) -> bool:
+        """Whether planar point ``xy`` (m, world) is inside ``workspace`` and within ``reach``."""
+        x, y = float(xy[0]), float(xy[1])
+        x_min, x_max, y_min, y_max = self.workspace
+        r = math.hypot(x - self.robot_base[0], y - self.robot_base[1])
+        return x_min <= x <= x_max and y_min <= y <= y_max and self.reach[0] <= r <= self.reach[1]
+
+    def model_names(self) -> list[str]:
+        """Names of the model instances the directives and primitives add."""
+        names = [d.add_model.name for d in self.directives if d.add_model is not None]
+        return names + [p.name for p in self.primitives]
+
+
+def resolve_scene_path(name_or_path: str | Path) -> Path:
+    """``diagrams/<name>.yaml`` for a bare scene name, else the given path."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml") or path.parent != Path("."):
+        return path
+    return DIAGRAMS_DIR / f"{name_or_path}.yaml"
+
+
+def load_scene(name_or_path: str | Path) -> SceneFile:
+    """Reads and checks a scene file; raises :class:`SceneFileError` (one line) on any fault."""
+    path = resolve_scene_path(name_or_path)
+    try:
+        text = path.read_text()
+    except OSError as error:
+        raise SceneFileError(f"{path}: <file>: {error.strerror or error}") from None
+    return load_scene_text(text, where=str(path))
+
+
+def load_scene_text(text: str, *, where: str = "<string>") -> SceneFile:
+    """Like :func:`load_scene` for YAML text; ``where`` names the source in errors."""
+    try:
+        scene = yaml_load_typed(schema=SceneFile, data=text)
+    except Exception as error:  # yaml_load_typed raises several types without the key path
+        key = _locate_bad_key(text)
+        raise SceneFileError(f"{where}: {key}: {_one_line(error)}") from None
+    try:
+        _check(scene)
+    except _BadValue as error:
+        raise SceneFileError(f"{where}: {error.key}: {error.reason}") from None
+    return scene
+
+
+class _BadValue(Exception):
+    def __init__(self, key: str, reason: str):
+        super().__init__(f"{key}: {reason}")
+        self.key, self.reason = key, reason
+
+
+def _one_line(error: BaseException) -> str:
+    text = " ".join(str(error).split()) or type(error).__name__
+    return f"{type(error).__name__}: {text}" if isinstance(error, AssertionError) else text
+
+
+def _check(scene: SceneFile) -> None:
+    """Checks what the schema's types cannot express."""
+
+    def need(ok: bool, key: str, reason: str):
+        if not ok:
+            raise _BadValue(key, reason)
+
+    need(bool(scene.name), "name", "must be a non-empty string")
+    need(len(scene.robot_base) == 4, "robot_base", "expected [x, y, z, yaw]")
+    need(len(scene.workspace) == 4, "workspace", "expected [x_min, x_max, y_min, y_max]")
+    need(len(scene.reach) == 2 and 0 <= scene.reach[0] < scene.reach[1], "reach",
+         "expected [r_min, r_max] with 0 <= r_min < r_max")
+    need(scene.in_workspace(scene.gripper_start.xy), "gripper_start.xy",
+         "outside the workspace or the arm's reach")
+    need(len(scene.gripper_start.xy) == 2, "gripper_start.xy", "expected [x, y]")
+    need(scene.gripper_start.height > 0, "gripper_start.height", "must be > 0")
+    for i, action in enumerate(scene.actions):
+        ok = len(action) == 2 and all(math.isfinite(a) for a in action)
+        need(ok, f"actions[{i}]", f"expected two finite numbers, got {action}")
+    need(scene.action_duration > 0, "action_duration", "must be > 0")
+    plant = scene.plant
+    need(plant.time_step > 0, "plant.time_step", "the plant must be discrete (> 0)")
+    # Drake checks these only when the plant is built; a scene file should fail on loading.
+    for key, value, known in (
+        ("contact_model", plant.contact_model, _CONTACT_MODELS),
+        ("discrete_contact_approximation", plant.discrete_contact_approximation, _APPROXIMATIONS),
+        ("contact_surface_representation", plant.contact_surface_representation, _SURFACES),
+    ):
+        need(value in known, f"plant.{key}", f"unknown value {value!r} (known: {', '.join(known)})")
+    c = scene.control
+    need(0 < c.move_fraction <= 1, "control.move_fraction", "must lie in (0, 1]")
+    need(c.max_step > 0, "control.max_step", "must be > 0")
+    need(c.ik_period >= scene.plant.time_step, "control.ik_period", "must be >= plant.time_step")
+    need(len(c.nominal_q) == 7, "control.nominal_q", "expected 7 joint angles")
+    for i, p in enumerate(scene.primitives):
+        key = f"primitives[{i}]"
+        need(bool(p.name), f"{key}.name", "must be a non-empty string")
+        need(p.shape in ("box", "cylinder"), f"{key}.shape", f"unknown shape {p.shape!r}")
+        n_size = 3 if p.shape == "box" else 2
+        need(len(p.size) == n_size and min(p.size) > 0, f"{key}.size",
+             f"expected {n_size} positive numbers")
+        need(len(p.xyz) == 3 and len(p.rpy) == 3, f"{key}.xyz", "xyz and rpy need 3 numbers")
+        need(p.welded or p.mass > 0, f"{key}.mass", "a free body needs mass > 0")
+        need(len(p.rgba) == 4, f"{key}.rgba", "expected 4 numbers")
+    names = scene.model_names()
+    duplicates = sorted({n for n in names if names.count(n) > 1})
+    need(not duplicates, "directives", f"duplicate model names {duplicates}")
+    need(not scene.target or scene.target in names, "target",
+         f"{scene.target!r} is not a model the scene adds")
+    try:
+        scene.tracker_params()
+    except ValueError as error:
+        raise _BadValue("tracker", _one_line(error)) from None
+
+
+# ----------------------------------------------------------------------- locating a bad key
+# yaml_load_typed's messages name the field at best, never its path. We find the path by
+# loading ever smaller pieces of the document: a piece keeps one branch of the YAML tree (tags
+# such as !Rpy intact), and the deepest branch that still fails alone is the culprit.
+
+
+def _locate_bad_key(text: str) -> str:
+    try:
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        return f"<yaml line {mark.line + 1}>" if mark is not None else "<yaml>"
+    if not isinstance(root, yaml.MappingNode):
+        return "<root>"
+    path: list[str] = []
+
+    def fails(wrapped: yaml.Node) -> bool:
+        try:
+            yaml_load_typed(schema=SceneFile, data=yaml.serialize(wrapped))
+        except Exception:
+            return True
+        return False
+
+    def wrap(chain: list[tuple[yaml.Node, object]], leaf: yaml.Node) -> yaml.Node:
+        # Rebuild the document holding only `leaf` at the end of the chain of parents.
+        node = leaf
+        for parent, key in reversed(chain):
+            if isinstance(parent, yaml.MappingNode):
+                node = yaml.MappingNode(parent.tag, [(key, node)], flow_style=False)
+            else:
+                node = yaml.SequenceNode(parent.tag, [node], flow_style=False)
+        return node
+
+    chain: list[tuple[yaml.Node, object]] = []
+    node: yaml.Node = root
+    while True:
+        if chain and fails(wrap(chain, _emptied(node))):
+            break  # the key itself is at fault (unknown, or of the wrong kind), not its content
+        children = _children(node)
+        found = None
+        for label, key, child in children:
+            if fails(wrap([*chain, (node, key)], child)):
+                found = (label, key, child)
+                break
+        if found is None:
+            break
+        label, key, child = found
+        path.append(label)
+        chain.append((node, key))
+        node = child
+    return _format_path(path) or "<root>"
+
+
+def _emptied(node: yaml.Node) -> yaml.Node:
+    if isinstance(node, yaml.MappingNode):
+        return yaml.MappingNode(node.tag, [], flow_style=True)
+    if isinstance(node, yaml.SequenceNode):
+        return yaml.SequenceNode(node.tag, [], flow_style=True)
+    return node
+
+
+def _children(node: yaml.Node) -> list[tuple[str, object, yaml.Node]]:
+    if isinstance(node, yaml.MappingNode):
+        return [(str(k.value), k, v) for k, v in node.value]
+    if isinstance(node, yaml.SequenceNode):
+        return [(f"[{i}]", None, v) for i, v in enumerate(node.value)]
+    return []
+
+
+def _format_path(parts: list[str]) -> str:
+    out = ""
+    for part in parts:
+        out += part if part.startswith("[") or not out else f".{part}"
+    return out

@@ -1,0 +1,232 @@
+"""Tests for the scene files (diagrams/*.yaml), the scene builder and the planar controller.
+
+Numbers: a free-space step must reach its planar goal within 2 mm while the gripper's height
+stays within 2 mm and its yaw within 1 degree; a push must move a box by the step minus the
+initial gap (within 5 mm); untouched objects must not creep. Units: m, rad, s.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from stucco_drake.core import SoftTrackingParams
+from stucco_drake.scenes import (
+    DIAGRAMS_DIR,
+    SceneFileError,
+    build_scene,
+    load_scene,
+    load_scene_text,
+)
+from stucco_drake.scenes.playback import make_simulator, play, record
+
+# Action counts of the paper's sequences; the training scenes carry a 10-action smoke push.
+SCENES = {"FB": 54, "BC": 102, "IB": 44, "TC": 40,
+          "SELECT1": 10, "SELECT2": 10, "SELECT3": 10, "SELECT4": 10}
+
+TABLE = """
+directives:
+- add_model:
+    name: table
+    file: package://stucco_drake_models/table.sdf
+- add_weld:
+    parent: world
+    child: table::base_link
+"""
+
+
+def _scene_text(body: str, *, start=(0.15, 0.0), actions=()) -> str:
+    """A small scene: the table, the robot at its default base, and ``body`` (YAML)."""
+    lines = "\n" + "".join(f"  - [{a}, {b}]\n" for a, b in actions) if actions else " []\n"
+    return (f"name: test\ngripper_start:\n  xy: [{start[0]}, {start[1]}]\n  height: 0.1\n"
+            f"plant:\n  time_step: 0.002\n  discrete_contact_approximation: sap\n"
+            f"  contact_model: hydroelastic_with_fallback\n"
+            f"{TABLE}{body}actions:{lines}")
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_scene_file_loads_and_builds(name):
+    scene = load_scene(name)
+    assert scene.name == name
+    assert len(scene.actions) == SCENES[name]
+    assert isinstance(scene.tracker_params(), SoftTrackingParams)
+    assert scene.plant.discrete_contact_approximation == "sap"
+    built = build_scene(scene)
+    assert built.plant.time_step() == scene.plant.time_step > 0
+    assert built.free_bodies, "every scene has movable objects"
+    # No two objects start interpenetrating (the table is what they rest on).
+    context = built.diagram.CreateDefaultContext()
+    query = built.diagram.GetOutputPort("query_object").Eval(context)
+    inspector = query.inspector()
+    for pair in query.ComputeSignedDistancePairwiseClosestPoints(0.0):
+        names = [inspector.GetName(inspector.GetFrameId(g)) for g in (pair.id_A, pair.id_B)]
+        if not any(n.startswith("table::") for n in names):
+            assert pair.distance > 0, f"{names} overlap by {-pair.distance * 1000:.1f} mm"
+    for port in ("robot_state", "applied_torque", "commanded_torque", "desired_state",
+                 "planar_goal",
+                 "plant_state", "contact_results", "query_object", "action_index"):
+        assert built.diagram.HasOutputPort(port)
+    assert built.diagram.GetOutputPort("applied_torque").size() == (
+        built.robot_plant.num_velocities()
+    )
+
+
+@pytest.mark.parametrize("name", ["FB", "BC", "IB", "TC"])
+def test_paper_paths_stay_within_workspace_and_reach(name):
+    # The unobstructed path of the prescribed actions (a blocked gripper falls short of it).
+    scene = load_scene(name)
+    steps = np.clip(scene.actions, -1, 1) * scene.control.max_step
+    path = np.array(scene.gripper_start.xy) + np.cumsum(steps, axis=0)
+    outside = [tuple(p.round(3)) for p in path if not scene.in_workspace(p)]
+    assert not outside
+
+
+@pytest.mark.parametrize("name", sorted(SCENES))
+def test_scene_plays_its_first_actions(name):
+    scene = load_scene(name)
+    built = build_scene(scene)
+    records, _ = play(built, 2)
+    assert [r.index for r in records] == [-1, 0, 1]
+    height = scene.gripper_start.height
+    for rec in records:
+        assert abs(rec.gripper_xyz[2] - height) < 0.002
+    # The first action starts from the start position and is the paper's clipped, scaled step.
+    step = np.clip(scene.actions[0], -1, 1) * scene.control.max_step
+    np.testing.assert_allclose(records[1].goal_xy, np.array(scene.gripper_start.xy) + step,
+                               atol=1e-6)
+    for name_, pose in records[-1].objects.items():  # nothing toppled or was flung
+        assert abs(pose[2] - records[0].objects[name_][2]) < 0.005, name_
+
+
+def test_free_space_steps_reach_their_goals():
+    # Steps along x, diagonal, a clipped one (u = 2 -> 0.03 m) and a fractional one.
+    actions = [(1, 0), (-1, 1), (0, -2), (0.3, -0.6)]
+    built = build_scene(load_scene_text(_scene_text("", actions=actions)))
+    records, _ = play(built)
+    yaw0 = records[0].gripper_yaw
+    for prev, rec, u in zip(records[:-1], records[1:], actions, strict=True):
+        step = np.clip(u, -1, 1) * 0.03
+        # Each step starts from the measured position at the end of the previous action.
+        np.testing.assert_allclose(rec.goal_xy, prev.gripper_xyz[:2] + step, atol=1e-6)
+        assert np.linalg.norm(rec.gripper_xyz[:2] - rec.goal_xy) < 0.002
+        assert abs(rec.gripper_xyz[2] - 0.1) < 0.002
+        assert abs(math.remainder(rec.gripper_yaw - yaw0, 2 * math.pi)) < math.radians(1)
+    assert abs(yaw0 - math.pi / 2) < 1e-6
+
+
+def test_objects_rest_still_when_untouched():
+    scene = load_scene("FB")
+    scene.actions = []  # the gripper holds its start pose, 0.07 m from the nearest object
+    built = build_scene(scene)
+    simulator = make_simulator(built)
+    before = record(built, simulator, -1)
+    simulator.AdvanceTo(1.0)
+    after = record(built, simulator, 0)
+    for name, pose in before.objects.items():
+        assert np.linalg.norm(after.objects[name][:3] - pose[:3]) < 1e-4, name
+        assert abs(after.objects[name][3] - pose[3]) < math.radians(0.05), name
+
+
+def test_applied_torque_balances_gravity_when_holding_still():
+    # What a wrench estimator relies on: at rest and free of contact, the exported torque is
+    # the robot's gravity torque, in the robot-only plant's ordering.
+    built = build_scene(load_scene_text(_scene_text("")))
+    simulator = make_simulator(built)
+    simulator.AdvanceTo(0.3)
+    context = simulator.get_context()
+    x = built.diagram.GetOutputPort("robot_state").Eval(context)
+    tau = built.diagram.GetOutputPort("applied_torque").Eval(context)
+    robot_context = built.robot_plant.CreateDefaultContext()
+    built.robot_plant.SetPositionsAndVelocities(robot_context, x)
+    tau_g = -built.robot_plant.CalcGravityGeneralizedForces(robot_context)
+    assert np.abs(tau_g).max() > 10  # the arm does carry its weight
+    np.testing.assert_allclose(tau, tau_g, atol=0.2)
+    np.testing.assert_allclose(x[:built.robot_plant.num_positions()], built.q_start, atol=1e-3)
+
+
+PUSH_SCENE = """primitives:
+- name: box
+  shape: box
+  size: [0.06, 0.12, 0.1]
+  xyz: [0.23, 0.0, 0.05]
+  mass: 0.3
+  friction: 0.5
+- name: wall
+  shape: box
+  size: [0.1, 0.4, 0.2]
+  xyz: [0.335, 0.0, 0.1]
+  welded: true
+"""
+
+
+def _gap_along_x(built, a: str, b: str) -> float:
+    """Smallest signed distance (m) between any geometry of model ``a`` and of model ``b``."""
+    context = built.diagram.CreateDefaultContext()
+    query = built.diagram.GetOutputPort("query_object").Eval(context)
+    inspector = query.inspector()
+    gaps = []
+    for pair in query.ComputeSignedDistancePairwiseClosestPoints(0.2):
+        names = {inspector.GetName(inspector.GetFrameId(g)).split("::")[0]
+                 for g in (pair.id_A, pair.id_B)}
+        if names == {a, b}:
+            gaps.append(pair.distance)
+    return min(gaps)
+
+
+def test_push_moves_box_by_step_minus_gap_and_wall_holds():
+    # The gripper (0.04 m half-width along x) starts 0.01 m short of the box; the box is
+    # 0.025 m short of a welded wall. Two full steps along +x.
+    built = build_scene(load_scene_text(_scene_text(PUSH_SCENE, actions=[(1, 0), (1, 0)])))
+    gap = _gap_along_x(built, "bubble_gripper", "box")
+    wall_gap = _gap_along_x(built, "box", "wall")
+    assert 0.005 < gap < 0.02 and 0.02 < wall_gap < 0.03
+    records, _ = play(built)
+    x0 = records[0].objects["box"][0]
+    first_push = records[1].objects["box"][0] - x0
+    assert abs(first_push - (0.03 - gap)) < 0.005, (first_push, gap)
+    # The second step would push the box 0.03 m further, but the welded wall stops it.
+    total = records[2].objects["box"][0] - x0
+    assert total < wall_gap + 0.001
+    assert total > wall_gap - 0.005
+    X_wall = built.welded_bodies["wall"].EvalPoseInWorld(built.plant.CreateDefaultContext())
+    np.testing.assert_allclose(X_wall.translation(), [0.335, 0.0, 0.1], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "patch, key",
+    [
+        ("name: FB\nbogus: 1\n", "bogus"),
+        ("gripper_start:\n  heigth: 0.1\n", "gripper_start.heigth"),
+        ("actions:\n  - [1, 0]\n  - [1, x]\n", "actions[1][1]"),
+        ("directives:\n- add_model:\n    name: a\n    fil: b.sdf\n", "directives[0].add_model.fil"),
+        ("plant:\n  time_step: fast\n", "plant.time_step"),
+        ("plant:\n  time_step: 0.002\n  contact_model: hydro\n", "plant.contact_model"),
+        ("tracker:\n  lenght: 0.02\n", "tracker"),
+        ("target: nothing\n", "target"),
+        ("actions:\n  - [1, 0, 3]\n", "actions[0]"),
+    ],
+)
+def test_malformed_scene_file_fails_with_one_line(tmp_path, patch, key):
+    text = (DIAGRAMS_DIR / "FB.yaml").read_text()
+    top = patch.split(":")[0]
+    # Replace the top-level entry `top` (up to the next top-level key) with the patch.
+    lines, out, skipping = text.splitlines(keepends=True), [], False
+    for line in lines:
+        starts_key = line[:1].isalpha()
+        if starts_key:
+            skipping = line.startswith(f"{top}:")
+        if not skipping:
+            out.append(line)
+    path = tmp_path / "bad.yaml"
+    path.write_text("".join(out) + patch)
+    with pytest.raises(SceneFileError) as info:
+        load_scene(path)
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith(f"{path}: {key}: "), message
+
+
+def test_scene_names_resolve_to_diagrams_and_missing_files_fail():
+    assert load_scene(DIAGRAMS_DIR / "TC.yaml").name == "TC"
+    with pytest.raises(SceneFileError, match=r"nope\.yaml"):
+        load_scene("nope")
