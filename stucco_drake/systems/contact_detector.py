@@ -44,6 +44,7 @@ from stucco_drake.core.detection import (
     fit_residual_statistics,
 )
 from stucco_drake.models import MODELS_DIR, add_iiwa14_with_bubble_gripper
+from stucco_drake.systems.ports import eval_finite
 from stucco_drake.systems.wrench_estimator import N_ARM, ExternalWrenchEstimator, make_robot_plant
 
 #: Arm configuration (rad) with the gripper pointing straight down, 0.6 m in front of the base.
@@ -113,13 +114,7 @@ class ContactDetector(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update)
 
     def _read(self, context, port) -> np.ndarray:
-        value = port.Eval(context)
-        if not np.all(np.isfinite(value)):
-            raise ValueError(
-                f"ContactDetector input port '{port.get_name()}' has a NaN or infinite entry "
-                f"at t={context.get_time():.6g} s"
-            )
-        return value
+        return eval_finite("ContactDetector", context, port)
 
     def _update(self, context, discrete_state):
         chi2 = self._read(context, self._chi2)[0]

@@ -29,6 +29,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
 from stucco_drake.core.contact_isolation import ContactParticleFilter
 from stucco_drake.models import BUBBLE_GRIPPER_URL, FLANGE_TO_GRIPPER_FRAME_Z, configure_parser
+from stucco_drake.systems.ports import eval_finite
 from stucco_drake.systems.wrench_estimator import N_ARM, make_robot_plant
 
 #: contact_source values.
@@ -258,13 +259,7 @@ class ContactIsolator(LeafSystem):
         return calc
 
     def _read(self, context, port) -> np.ndarray:
-        value = port.Eval(context)
-        if not np.all(np.isfinite(value)):
-            raise ValueError(
-                f"ContactIsolator input port '{port.get_name()}' has a NaN or infinite entry "
-                f"at t={context.get_time():.6g} s"
-            )
-        return value
+        return eval_finite("ContactIsolator", context, port)
 
     def _update(self, context, state):
         old = self._get(context)

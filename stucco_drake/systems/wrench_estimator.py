@@ -7,8 +7,6 @@ model of the robot alone (arm + gripper, no objects). It never reads contact for
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
@@ -19,6 +17,7 @@ from pydrake.systems.framework import LeafSystem
 from stucco_drake.core.detection import ResidualStatistics
 from stucco_drake.core.momentum_observer import memory_size, observer_step, wrench_least_squares
 from stucco_drake.models import add_iiwa14_with_bubble_gripper, configure_parser
+from stucco_drake.systems.ports import eval_finite
 
 N_ARM = 7
 
@@ -227,20 +226,9 @@ class ExternalWrenchEstimator(LeafSystem):
             self._noise_cache = (block, rng.standard_normal((_NOISE_BLOCK, 2 * N_ARM)))
         return self._noise_cache[1][row] * self._noise_std
 
-    def _check_finite(self, context, port, value) -> None:
-        # A sum is NaN or inf when any entry is: one cheap test per step, the full scan on failure.
-        if not math.isfinite(value.sum()) and not np.all(np.isfinite(value)):
-            bad = np.flatnonzero(~np.isfinite(value)).tolist()
-            raise ValueError(
-                f"ExternalWrenchEstimator input port '{port.get_name()}' has NaN or infinite "
-                f"entries at indices {bad} at t={context.get_time():.6g} s"
-            )
-
     def _update(self, context, discrete_state):
-        x = self._state_port.Eval(context)
-        tau = self._torque_port.Eval(context)
-        self._check_finite(context, self._state_port, x)
-        self._check_finite(context, self._torque_port, tau)
+        x = eval_finite("ExternalWrenchEstimator", context, self._state_port)
+        tau = eval_finite("ExternalWrenchEstimator", context, self._torque_port)
         old = context.get_discrete_state(self._xd).get_value()
         v = x[N_ARM:]
         if self._noisy:
