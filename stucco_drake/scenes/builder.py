@@ -216,11 +216,15 @@ def _start_positions(robot_plant: MultibodyPlant, scene: SceneFile):
     return hold, q_start, q_arm
 
 
-def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = False) -> BuiltScene:
+def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = False,
+                command_hook=None) -> BuiltScene:
     """Builds ``scene`` into a Diagram (see the module docstring); optionally draws to meshcat.
 
     With ``external_actions`` the Diagram exports a ``planar_step`` input instead of playing
-    ``scene.actions``.
+    ``scene.actions``. ``command_hook(builder, desired_state, robot_state)``, if given, gets the
+    planar controller's joint command port and the measured robot state port and returns the
+    port the joint controller tracks instead (a system inserted by the caller, e.g. for grasping);
+    the exported ``desired_state`` is then that port.
     """
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(scene.plant, builder)
@@ -273,7 +277,10 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
         move_fraction=control.move_fraction, gain=control.ik_gain, max_step=control.max_step,
     ))
     builder.Connect(select_state.get_output_port(), ctrl.GetInputPort("robot_state"))
-    builder.Connect(ctrl.GetOutputPort("desired_state"), idc.get_input_port_desired_state())
+    desired = ctrl.GetOutputPort("desired_state")
+    if command_hook is not None:
+        desired = command_hook(builder, desired, select_state.get_output_port())
+    builder.Connect(desired, idc.get_input_port_desired_state())
 
     sequence = None
     if external_actions:
@@ -289,7 +296,7 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
     builder.ExportOutput(select_state.get_output_port(), "robot_state")
     builder.ExportOutput(from_actuation.get_output_port(), "applied_torque")
     builder.ExportOutput(idc.get_output_port_control(), "commanded_torque")
-    builder.ExportOutput(ctrl.GetOutputPort("desired_state"), "desired_state")
+    builder.ExportOutput(desired, "desired_state")
     builder.ExportOutput(ctrl.GetOutputPort("planar_goal"), "planar_goal")
     builder.ExportOutput(plant.get_state_output_port(), "plant_state")
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")

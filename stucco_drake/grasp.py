@@ -1,0 +1,275 @@
+"""Grasping the target at its estimated pose after rummaging (Blind Object Retrieval's last step).
+
+:func:`execute_grasp` runs a top-down grasp from the simulator's current state with a
+:class:`~stucco_drake.systems.grasp_executor.GraspExecutor`: raise, open, move above the
+estimate while turning so the fingers close across the target's short horizontal side, descend,
+close, lift 10 cm. It judges the outcome two ways:
+
+* **lift success**: the target's origin ends at least ``min_lift`` (5 cm) above where it was
+  before the grasp, and lies between the fingers (see :func:`between_fingers`);
+* **the paper's geometric criterion** (RA-L 2022 Sec. V-C: "closed on the two long sides of the
+  box and not on a corner, or around more than half of the tomato can"), made precise in
+  :func:`geometric_check` from the true target pose and the measured gripper pose once the
+  fingers have closed.
+
+Units: m, rad, s; poses in the world frame; the table top is at z = 0.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.scenes.builder import GRIPPER, IIWA, BuiltScene, build_scene, yaw_of
+from stucco_drake.scenes.scene_file import SceneFile
+from stucco_drake.systems.grasp_executor import GraspExecutor
+
+#: Half width (m) of a bubble's contact pad across the closing axis (the membrane is 0.08 wide).
+PAD_HALF_WIDTH = 0.04
+#: Gripper frame to the palm's underside, and to the bubbles' lowest point (m, along world z).
+PALM_ABOVE_FRAME, BUBBLE_BELOW_FRAME = 0.06, 0.055
+#: Clearances (m): palm above the target's top, bubbles above the table, safe transit height.
+PALM_CLEARANCE, TABLE_CLEARANCE, SAFE_HEIGHT = 0.01, 0.01, 0.30
+#: Geometric criterion, box: max angle (rad) between the closing axis and the box's short axis,
+#: and min distance (m) from a pad's centre line to a vertical edge of the long face.
+MAX_AXIS_ERROR, EDGE_MARGIN = math.radians(15.0), 0.02
+EXECUTOR_NAME = "grasp_executor"
+#: Finger actuator effort limit (N) in grasp scenes; see :func:`build_grasp_scene`.
+FINGER_EFFORT = 120.0
+
+
+@dataclasses.dataclass
+class GraspResult:
+    """Outcome of one grasp.
+
+    Attributes:
+        success: lift >= ``min_lift`` and the target's origin between the fingers at the end.
+        lift_height: rise of the target's origin from before the grasp to the end (m).
+        geometric_ok: the paper's criterion at the end of closing (see :func:`geometric_check`).
+        final_pose: the target's true (x, y, z, yaw) at the end (m, rad, world).
+        reason: why it failed (or "ok"), with the numbers.
+        sim_time: simulated duration of the grasp (s); wall_time: its wall-clock time (s).
+    """
+
+    success: bool
+    lift_height: float
+    geometric_ok: bool
+    final_pose: np.ndarray
+    reason: str
+    sim_time: float = 0.0
+    wall_time: float = 0.0
+
+
+def build_grasp_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = True,
+                      finger_effort: float | None = FINGER_EFFORT,
+                      **executor_kwargs) -> BuiltScene:
+    """``build_scene`` with a :class:`GraspExecutor` (named ``grasp_executor``) between the
+    planar controller and the joint controller; it stays transparent until a grasp starts.
+
+    ``executor_kwargs`` go to :class:`GraspExecutor` (period, gain, lift, durations, ...).
+    ``finger_effort`` (N, None keeps the model's) raises the finger actuators' effort limit:
+    the model's 40 N squeezes at most 2 x 40 x 0.545 (bubble-box friction) = 44 N of friction,
+    less than the 10 kg box's 98 N weight; the paper's Panda fingers (30 N, friction 2) held
+    up to 120 N. 120 N per finger gives 131 N.
+    """
+
+    def insert(builder, desired, robot_state):
+        if finger_effort is not None:
+            _set_finger_effort(builder, finger_effort)
+        robot_plant = _robot_plant_of(builder)
+        executor = builder.AddNamedSystem(EXECUTOR_NAME, GraspExecutor(
+            robot_plant, robot_plant.GetModelInstanceByName(IIWA),
+            robot_plant.GetFrameByName("gripper_frame",
+                                       robot_plant.GetModelInstanceByName(GRIPPER)),
+            **executor_kwargs))
+        builder.Connect(desired, executor.GetInputPort("desired_state"))
+        builder.Connect(robot_state, executor.GetInputPort("robot_state"))
+        builder.ExportOutput(executor.GetOutputPort("grasp_phase"), "grasp_phase")
+        return executor.GetOutputPort("desired_state")
+
+    return build_scene(scene, meshcat=meshcat, external_actions=external_actions,
+                       command_hook=insert)
+
+
+def _set_finger_effort(builder, effort: float) -> None:
+    plant = builder.GetSubsystemByName("plant")
+    gripper = plant.GetModelInstanceByName(GRIPPER)
+    for index in plant.GetJointActuatorIndices(gripper):
+        plant.get_joint_actuator(index).set_effort_limit(effort)
+
+
+def _robot_plant_of(builder):
+    # The joint controller owns the robot-only plant the builder made; reuse it rather than
+    # building a second copy (its model instances and frames are what the executor needs).
+    return builder.GetSubsystemByName("joint_controller").get_multibody_plant_for_control()
+
+
+def grasp_pose(target_pose, target_shape, current_yaw: float):
+    """(x, y, yaw, z_grasp) of the gripper frame for a top-down grasp (m, rad, world).
+
+    ``target_pose`` is a RigidTransform X_WO or (x, y, yaw). The yaw closes the fingers along
+    the box's shorter horizontal half-extent axis; a cylinder keeps ``current_yaw``. The height
+    puts the palm ``PALM_CLEARANCE`` above the top of a target resting on the table (its top at
+    twice its half height), but keeps the bubbles ``TABLE_CLEARANCE`` above the table.
+    """
+    x, y, yaw = _planar(target_pose)
+    if isinstance(target_shape, BoxSdf):
+        hx, hy, hz = target_shape.half_extents
+        grasp_yaw = yaw if hx <= hy else yaw + math.pi / 2
+    elif isinstance(target_shape, CylinderSdf):
+        hz, grasp_yaw = target_shape.half_height, current_yaw
+    else:
+        raise TypeError(f"unsupported target shape {type(target_shape).__name__}")
+    z = max(2 * hz + PALM_CLEARANCE - PALM_ABOVE_FRAME, BUBBLE_BELOW_FRAME + TABLE_CLEARANCE)
+    return x, y, grasp_yaw, z
+
+
+def geometric_check(X_WO: RigidTransform, X_WG: RigidTransform, target_shape) -> tuple[bool, str]:
+    """The paper's geometric grasp criterion, from true target pose X_WO and gripper pose X_WG.
+
+    Let p = (p_x, p_y) be the grasp centre (gripper frame origin) in the target frame and u the
+    fingers' closing axis (gripper x) projected on the target's horizontal plane.
+
+    * Box (half extents a <= b across/along its long faces): the fingers close on the two long
+      sides, not a corner, iff the angle between u and the short axis is at most
+      ``MAX_AXIS_ERROR`` (15 deg; parallel pads at a larger angle meet an edge first), the
+      centre lies between the long faces (|p_short| < a), and the pads' centre line meets the
+      long faces at least ``EDGE_MARGIN`` (2 cm) inside their vertical edges:
+      |p_long| + a |tan(angle)| <= b - EDGE_MARGIN.
+    * Cylinder (radius r): the fingers are around more than half of the can iff, with d the
+      distance of the can's axis from the closing line and s its coordinate along that line,
+      the pads (each 2 ``PAD_HALF_WIDTH`` wide across the closing axis) cover more than half of
+      the can's diameter perpendicular to the closing axis, |[d - w, d + w] & [-r, r]| > r
+      (for pads at least as wide as the can's radius, w >= r, this is d < w: the pads reach
+      past the can's axis), and |s| < r (the axis lies between the pads).
+    """
+    X_OG = X_WO.inverse() @ X_WG
+    p = X_OG.translation()
+    u = X_OG.rotation().matrix()[:2, 0]
+    u = u / max(np.linalg.norm(u), 1e-9)
+    if isinstance(target_shape, BoxSdf):
+        hx, hy, _ = target_shape.half_extents
+        short, long_ = (0, 1) if hx <= hy else (1, 0)
+        a, b = sorted((hx, hy))
+        c = np.asarray(target_shape.center)[:2]
+        angle = math.acos(min(1.0, abs(u[short])))
+        reach = abs(p[long_] - c[long_]) + a * math.tan(angle)
+        ok = angle <= MAX_AXIS_ERROR and abs(p[short] - c[short]) < a and \
+            reach <= b - EDGE_MARGIN
+        return ok, (f"axis error {math.degrees(angle):.1f} deg, offsets short "
+                    f"{p[short] - c[short]:+.3f} long {p[long_] - c[long_]:+.3f} m")
+    r = target_shape.radius
+    axis = np.asarray(target_shape.center)[:2] - p[:2]  # can axis relative to the grasp centre
+    s = float(axis @ u)
+    d = float(abs(axis[0] * u[1] - axis[1] * u[0]))
+    w = PAD_HALF_WIDTH
+    covered = max(0.0, min(d + w, r) - max(d - w, -r))
+    ok = covered > r and abs(s) < r
+    return ok, f"pads cover {covered / (2 * r):.0%} of the can, axis offset {d:.3f} m"
+
+
+def between_fingers(X_WG: RigidTransform, p_WO, finger_q) -> bool:
+    """Whether point p_WO (m, world) lies between the fingers: in the gripper frame, along the
+    closing axis x between the two bubble apexes (-q_left, q_right; 1 cm tolerance for the
+    squeezed membranes), within a pad's width across it (|y| <= 2 PAD_HALF_WIDTH, as a box
+    grasped off-centre along its long side is still held), and within 0.15 m along z."""
+    p = X_WG.inverse() @ np.asarray(p_WO)
+    left, right = finger_q
+    return (-left - 0.01 <= p[0] <= right + 0.01 and abs(p[1]) <= 2 * PAD_HALF_WIDTH
+            and abs(p[2]) <= 0.15)
+
+
+def _planar(target_pose) -> tuple[float, float, float]:
+    if isinstance(target_pose, RigidTransform):
+        t = target_pose.translation()
+        return float(t[0]), float(t[1]), yaw_of(target_pose.rotation())
+    x, y, yaw = (float(v) for v in np.asarray(target_pose, dtype=float).ravel()[[0, 1, -1]])
+    return x, y, yaw
+
+
+def _finger_positions(built: BuiltScene, plant_context) -> tuple[float, float]:
+    gripper = built.plant.GetModelInstanceByName(GRIPPER)
+    return tuple(built.plant.GetJointByName(name, gripper).get_translation(plant_context)
+                 for name in ("left_finger_joint", "right_finger_joint"))
+
+
+def _grasp_context(built: BuiltScene, simulator: Simulator):
+    """(built, simulator) holding a GraspExecutor, at the given simulator's state.
+
+    A scene built without the executor is rebuilt with it and the plant's state and the
+    clock are copied over; the joint controller's integral term restarts at zero.
+    """
+    if built.diagram.HasSubsystemNamed(EXECUTOR_NAME):
+        return built, simulator
+    grasp_built = build_grasp_scene(built.scene, external_actions=True)
+    grasp_sim = Simulator(grasp_built.diagram)
+    context = grasp_sim.get_mutable_context()
+    context.SetTime(simulator.get_context().get_time())
+    src = built.plant.GetMyContextFromRoot(simulator.get_context())
+    dst = grasp_built.plant.GetMyMutableContextFromRoot(context)
+    grasp_built.plant.SetPositionsAndVelocities(
+        dst, built.plant.GetPositionsAndVelocities(src))
+    grasp_sim.Initialize()
+    return grasp_built, grasp_sim
+
+
+def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_shape, *,
+                  min_lift: float = 0.05, cylinder_yaw: float | None = None) -> GraspResult:
+    """Grasps at ``target_pose`` (RigidTransform X_WO or (x, y, yaw); m, rad, world) a target of
+    ``target_shape`` (BoxSdf / CylinderSdf in the target's frame) and lifts it 10 cm.
+
+    Runs from the simulator's current state (e.g. after rummaging). With a scene from
+    :func:`build_grasp_scene` it continues that simulation in place; otherwise the plant's
+    state is copied into a freshly built grasp scene (the given simulator is left untouched).
+    The target's true pose comes from the plant (model ``scene.target``). A cylinder can be
+    grasped at any yaw: ``cylinder_yaw`` (rad, world; default the gripper's current yaw) picks
+    one, e.g. so the open fingers (0.2 m across, plates included) miss known clutter.
+    """
+    built, simulator = _grasp_context(built, simulator)
+    diagram, plant = built.diagram, built.plant
+    context = simulator.get_mutable_context()
+    if diagram.HasInputPort("planar_step"):
+        port = diagram.GetInputPort("planar_step")
+        if not port.HasValue(context):
+            port.FixValue(context, np.zeros(2))  # the planar controller just holds its place
+    executor = diagram.GetSubsystemByName(EXECUTOR_NAME)
+    target = built.free_bodies[built.scene.target]
+    plant_context = plant.GetMyContextFromRoot(context)
+    z_before = target.EvalPoseInWorld(plant_context).translation()[2]
+    X_WG = built.gripper_frame().CalcPoseInWorld(plant_context)
+    yaw_now = yaw_of(X_WG.rotation()) if cylinder_yaw is None else cylinder_yaw
+    x, y, yaw, z_grasp = grasp_pose(target_pose, target_shape, yaw_now)
+    executor.start(executor.GetMyMutableContextFromRoot(context), (x, y), yaw,
+                   SAFE_HEIGHT, z_grasp)
+    t0, wall0 = context.get_time(), time.perf_counter()
+
+    simulator.AdvanceTo(t0 + executor.phase_end("close"))
+    plant_context = plant.GetMyContextFromRoot(context)
+    geometric_ok, geometry = geometric_check(
+        target.EvalPoseInWorld(plant_context),
+        built.gripper_frame().CalcPoseInWorld(plant_context), target_shape)
+
+    simulator.AdvanceTo(t0 + executor.total_duration)
+    plant_context = plant.GetMyContextFromRoot(context)
+    X_WO = target.EvalPoseInWorld(plant_context)
+    X_WG = built.gripper_frame().CalcPoseInWorld(plant_context)
+    lift = float(X_WO.translation()[2] - z_before)
+    held = between_fingers(X_WG, X_WO.translation(), _finger_positions(built, plant_context))
+    success = lift >= min_lift and held
+    reasons = []
+    if lift < min_lift:
+        reasons.append(f"lifted {lift:.3f} m < {min_lift:.3f} m")
+    if not held:
+        reasons.append("target not between the fingers")
+    reason = "ok" if success else "; ".join(reasons)
+    return GraspResult(
+        success=success, lift_height=lift, geometric_ok=geometric_ok,
+        final_pose=np.array([*X_WO.translation(), yaw_of(X_WO.rotation())]),
+        reason=f"{reason} (geometry: {geometry})", sim_time=context.get_time() - t0,
+        wall_time=time.perf_counter() - wall0)

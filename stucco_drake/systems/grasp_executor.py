@@ -1,0 +1,234 @@
+"""GraspExecutor: a timed state machine that grasps and lifts an object from above.
+
+While idle it passes the upstream joint command (the planar controller's) through unchanged.
+:meth:`GraspExecutor.start` arms it on a context; from then on it sequences, on the simulator
+clock, the phases listed in :data:`PHASES`:
+
+1. ``raise``: lift the gripper straight up, to the safe height or as high as the arm reaches
+   there (pointing down near the pedestal, the elbow limit caps the height: about 0.2 m at
+   0.3 m from the base), before opening the fingers so that opening them cannot shove an
+   object the rummaging left next to the gripper;
+2. ``open``: open both fingers fully;
+3. ``transit``: move above the grasp point while turning (yaw) to the grasp orientation; the
+   height reaches the safe height halfway, so the gripper climbs before it passes over things;
+4. ``descend``: go straight down to the grasp height;
+5. ``close``: close the fingers (see ``close_position``: a command beyond the closed stop, so the
+   joint controller keeps squeezing once the bubbles touch the object);
+6. ``lift``: raise the gripper by ``lift``;
+7. ``hold``: hold still so the object settles (or slips) before the caller measures.
+
+Each phase follows a minimum-jerk profile between two gripper-frame poses (x, y, z, yaw; m, rad,
+world frame; the gripper points down, see ``gripper_rotation``) and differential IK on the full
+pose integrates the arm's joint command, so the rummaging controller's planar constraint does
+not apply. Fingers are commanded in position through the same joint controller.
+
+Ports:
+    input ``desired_state``: upstream [q; v] command of the robot-only plant.
+    input ``robot_state``: measured [q; v] of the robot-only plant.
+    output ``desired_state``: the command to track (upstream while idle).
+    output ``grasp_phase``: index into :data:`PHASES` (-1 idle, ``len(PHASES)`` done).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.eigen_geometry import AngleAxis
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from stucco_drake.systems.planar_controller import (
+    ArmKinematics,
+    gripper_rotation,
+    solve_start_ik,
+)
+
+PHASES = ("raise", "open", "transit", "descend", "close", "lift", "hold")
+#: Default phase durations (s), same order as PHASES.
+DURATIONS = (1.5, 0.6, 2.5, 2.0, 1.2, 2.0, 0.7)
+#: Damping of the IK pseudo-inverse (m, rad); only matters near singular postures.
+_DAMPING = 1e-3
+#: Gain (1/s) of the null-space pull towards the posture at start (one redundant DoF).
+_NULL_GAIN = 2.0
+# State layout: mode, t0, q_cmd (7), then the plan: start (x, y, z, yaw), grasp (x, y, yaw),
+# z_safe, z_grasp, finger position at start, q_nominal (7).
+_MODE, _T0, _Q = 0, 1, slice(2, 9)
+_START, _GRASP, _ZS, _ZG, _F0, _QN = slice(9, 13), slice(13, 16), 16, 17, 18, slice(19, 26)
+_ZR = 26  # height the raise phase reaches (m)
+_N_STATE = 27
+
+
+def _min_jerk(s: float) -> tuple[float, float]:
+    """Minimum-jerk value and its derivative d/ds at s (clamped to [0, 1])."""
+    s = min(max(s, 0.0), 1.0)
+    return s**3 * (10 - 15 * s + 6 * s * s), 30 * s * s * (1 - s) ** 2
+
+
+class GraspExecutor(LeafSystem):
+    """Top-down grasp-and-lift sequencer (see the module docstring).
+
+    Args:
+        robot_plant: the robot-only plant (arm and gripper) the joint controller uses.
+        arm_instance, gripper_frame: the arm's model instance and the grasp-centre frame.
+        period: update period (s) of the IK and the state machine.
+        gain: pose-error feedback gain (1/s) of the differential IK.
+        open_position: finger command when open (m, per finger).
+        close_position: finger command when closing (m, per finger; below the 0 stop, so the
+            position error, hence the squeeze force, persists once the bubbles touch).
+        lift: how far the ``lift`` phase raises the gripper (m).
+        durations: phase durations (s), in the order of :data:`PHASES`.
+    """
+
+    def __init__(self, robot_plant, arm_instance, gripper_frame, *, period: float = 0.01,
+                 gain: float = 10.0, open_position: float = 0.055,
+                 close_position: float = -0.35, lift: float = 0.1, durations=DURATIONS):
+        super().__init__()
+        self._kin = ArmKinematics(robot_plant, arm_instance, gripper_frame)
+        self._nq, self._nv = robot_plant.num_positions(), robot_plant.num_velocities()
+        self._period, self._gain = float(period), float(gain)
+        self._open, self._close, self._lift = float(open_position), float(close_position), lift
+        self._durations = np.asarray(durations, dtype=float)
+        if len(self._durations) != len(PHASES):
+            raise ValueError(f"need {len(PHASES)} durations")
+        self._ends = np.cumsum(self._durations)
+        arm_joints = set(self._kin.q_index)
+        fingers = [robot_plant.get_joint(j) for j in robot_plant.GetJointIndices()]
+        fingers = [j for j in fingers if j.num_positions() == 1
+                   and j.position_start() not in arm_joints]
+        self._finger_q = np.array([j.position_start() for j in fingers])
+        self._finger_v = np.array([j.velocity_start() for j in fingers])
+        self._arm_v = self._kin.v_index
+        self.DeclareVectorInputPort("desired_state", self._nq + self._nv)
+        self.DeclareVectorInputPort("robot_state", self._nq + self._nv)
+        self._state = self.DeclareDiscreteState(np.zeros(_N_STATE))
+        self._v_state = self.DeclareDiscreteState(np.zeros(7 + len(fingers) + 1))
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        self.DeclareVectorOutputPort("desired_state", self._nq + self._nv, self._calc_desired)
+        self.DeclareVectorOutputPort("grasp_phase", 1, self._calc_phase)
+
+    @property
+    def total_duration(self) -> float:
+        """Time (s) from :meth:`start` to the end of the last phase."""
+        return float(self._ends[-1])
+
+    def phase_end(self, name: str) -> float:
+        """Time (s) from :meth:`start` to the end of phase ``name``."""
+        return float(self._ends[PHASES.index(name)])
+
+    def start(self, context, grasp_xy, grasp_yaw: float, z_safe: float, z_grasp: float):
+        """Arms the sequence on this system's ``context``, from the measured robot state.
+
+        Args:
+            grasp_xy: where the grasp centre goes (m, world).
+            grasp_yaw: yaw of the fingers' closing axis (rad, world); the equivalent yaw
+                (mod pi, the fingers are symmetric) nearest the current one is used.
+            z_safe: height of the gripper frame for the transit (m, world).
+            z_grasp: height of the gripper frame when closing (m, world).
+        """
+        x = self.get_input_port(1).Eval(context)
+        q = x[:self._nq]
+        self._kin.set_positions(q)
+        X = self._kin.pose()
+        yaw0 = float(np.arctan2(X.rotation().matrix()[1, 0], X.rotation().matrix()[0, 0]))
+        yaw_g = yaw0 + np.remainder(grasp_yaw - yaw0 + np.pi / 2, np.pi) - np.pi / 2
+        state = np.zeros(_N_STATE)
+        state[_MODE], state[_T0] = 1.0, context.get_time()
+        state[_Q] = q[self._kin.q_index]
+        state[_START] = [*X.translation(), yaw0]
+        state[_GRASP] = [grasp_xy[0], grasp_xy[1], yaw_g]
+        z0 = X.translation()[2]
+        state[_ZS], state[_ZG] = max(z_safe, z0), z_grasp
+        state[_ZR] = self._reachable_height(q, X.translation()[:2], yaw0, z0, state[_ZS])
+        state[_F0] = float(np.mean(q[self._finger_q]))
+        state[_QN] = q[self._kin.q_index]
+        context.SetDiscreteState(int(self._state), state)
+        n_f = len(self._finger_q)
+        context.SetDiscreteState(int(self._v_state), np.concatenate(
+            [np.zeros(7), np.full(n_f, state[_F0]), [0.0]]))
+
+    def _reachable_height(self, q_full, xy, yaw: float, z_from: float, z_to: float) -> float:
+        """Highest z <= z_to (m) reachable straight above ``xy`` with the gripper down, found by
+        IK continuation in 2 cm steps from the current posture."""
+        q_arm, z_ok = q_full[self._kin.q_index], z_from
+        for z in np.arange(z_from + 0.02, z_to + 0.02, 0.02):
+            z = min(z, z_to)
+            X = RigidTransform(gripper_rotation(yaw), [xy[0], xy[1], z])
+            try:
+                q_arm = solve_start_ik(self._kin, q_full, X, q_arm, tol=1e-5, max_iter=100)
+            except RuntimeError:
+                break
+            z_ok = z
+        return z_ok
+
+    def _reference(self, s, t: float):
+        """Gripper pose (x, y, z, yaw), its rate, and the finger command at plan time t."""
+        x0, y0, z0, yaw0 = s[_START]
+        xg, yg, yaw_g = s[_GRASP]
+        zs, zg, zr = s[_ZS], s[_ZG], s[_ZR]
+        poses = [(x0, y0, z0, yaw0), (x0, y0, zr, yaw0), (x0, y0, zr, yaw0),
+                 (xg, yg, zs, yaw_g), (xg, yg, zg, yaw_g), (xg, yg, zg, yaw_g),
+                 (xg, yg, zg + self._lift, yaw_g), (xg, yg, zg + self._lift, yaw_g)]
+        fingers = [s[_F0], s[_F0], self._open, self._open, self._open, self._close,
+                   self._close, self._close]
+        k = int(np.searchsorted(self._ends, t, side="right"))
+        if k >= len(PHASES):
+            return np.array(poses[-1]), np.zeros(4), fingers[-1], 0.0, len(PHASES)
+        t_begin = self._ends[k] - self._durations[k]
+        value, slope = _min_jerk((t - t_begin) / self._durations[k])
+        a, b = np.array(poses[k]), np.array(poses[k + 1])
+        rate = slope / self._durations[k]
+        f = fingers[k] + value * (fingers[k + 1] - fingers[k])
+        pose, pose_rate = a + value * (b - a), rate * (b - a)
+        if PHASES[k] == "transit":
+            # Climb in the first half of the transit, before passing over the clutter.
+            z_value, z_slope = _min_jerk(2 * (t - t_begin) / self._durations[k])
+            pose[2] = a[2] + z_value * (b[2] - a[2])
+            pose_rate[2] = 2 * z_slope / self._durations[k] * (b[2] - a[2])
+        return pose, pose_rate, f, rate * (fingers[k + 1] - fingers[k]), k
+
+    def _update(self, context, discrete_state):
+        s = context.get_discrete_state(self._state).value()
+        if s[_MODE] == 0.0:
+            return
+        # Reference at the end of this update's interval (the command holds until then).
+        t = context.get_time() - s[_T0] + self._period
+        pose, rate, f, f_rate, _ = self._reference(s, t)
+        X_des = RigidTransform(gripper_rotation(pose[3]), pose[:3])
+        q = s[_Q]
+        q_full = self.get_input_port(0).Eval(context)[:self._nq].copy()
+        q_full[self._kin.q_index] = q
+        self._kin.set_positions(q_full)
+        X = self._kin.pose()
+        aa = AngleAxis((X_des.rotation() @ X.rotation().inverse()).matrix())
+        error = np.concatenate([aa.angle() * aa.axis(), X_des.translation() - X.translation()])
+        V = self._gain * error + np.array([0.0, 0.0, rate[3], *rate[:3]])
+        J = self._kin.jacobian()
+        J_pinv = J.T @ np.linalg.inv(J @ J.T + _DAMPING**2 * np.eye(6))
+        v = J_pinv @ V + (np.eye(7) - J_pinv @ J) @ (_NULL_GAIN * (s[_QN] - q))
+        # Respect the joint speed limits by slowing every joint alike (keeps the direction).
+        v *= min(1.0, float(np.min(self._kin.v_limit / (np.abs(v) + 1e-12))))
+        new = s.copy()
+        new[_Q] = np.clip(q + v * self._period, self._kin.q_lower, self._kin.q_upper)
+        discrete_state.set_value(self._state, new)
+        discrete_state.set_value(self._v_state, np.concatenate(
+            [v, np.full(len(self._finger_q), f), [f_rate]]))
+
+    def _calc_desired(self, context, output: BasicVector):
+        upstream = self.get_input_port(0).Eval(context)
+        s = context.get_discrete_state(self._state).value()
+        if s[_MODE] == 0.0:
+            output.SetFromVector(upstream)
+            return
+        vs = context.get_discrete_state(self._v_state).value()
+        x = upstream.copy()
+        x[self._kin.q_index] = s[_Q]
+        x[self._nq + self._arm_v] = vs[:7]
+        x[self._finger_q] = vs[7:-1]
+        x[self._nq + self._finger_v] = vs[-1]
+        output.SetFromVector(x)
+
+    def _calc_phase(self, context, output: BasicVector):
+        s = context.get_discrete_state(self._state).value()
+        if s[_MODE] == 0.0:
+            output.SetFromVector([-1.0])
+            return
+        output.SetFromVector([float(self._reference(s, context.get_time() - s[_T0])[4])])
