@@ -163,6 +163,8 @@ class RobotPenetration:
         axis_mask = self._buffer("axis_mask", block * n_pairs, np.bool_)
         strides = np.array([extent[1] * extent[2], extent[2], 1])
         flat_values = crop_values.ravel()
+        inverse_h = np.float32(1.0 / grid.resolution)
+        origin_cells = origin_cells.astype(np.float32)
         # Flat crop index of a pair = point's flat index - config's (both in cells): two gathers
         # per surviving pair instead of six. Skipped configs only ever reach culled pairs.
         point_nodes = np.tensordot(strides, point_cells.astype(np.int64), axes=1)
@@ -200,15 +202,12 @@ class RobotPenetration:
             particle, point, rows, config, config_particle = (
                 v[near] for v in (particle, point, rows, config, config_particle)
             )
-            relative = np.stack(
-                [
-                    points_e[a, rows, point].astype(np.float64)
-                    - configs_e[a, config_particle, config]
-                    for a in range(3)
-                ],
-                axis=-1,
-            )
-            excess = np.maximum(-grid(relative) - tolerance, 0.0)
+            cells = [
+                (points_e[a, rows, point] - configs_e[a, config_particle, config]) * inverse_h
+                - origin_cells[a]
+                for a in range(3)
+            ]
+            excess = np.maximum(-grid.at_cell_coordinates(*cells) - tolerance, 0.0)
             per_particle[start:stop] += np.bincount(particle, excess, minlength=stop - start)
             per_point[start:stop] += np.bincount(
                 particle * n_points + point, excess, minlength=(stop - start) * n_points

@@ -172,6 +172,36 @@ class GridSdf:
         result = c0 * (1 - fx) + c1 * fx
         return np.where(inside, result, np.inf)
 
+    def at_cell_coordinates(self, u, v, w) -> np.ndarray:
+        """Signed distance at grid coordinates (cells from ``lower``, float32 arrays per axis).
+
+        The hot path of the penetration check: structure-of-arrays and float32 (point and
+        config coordinates are float32 already), same interpolant as :meth:`__call__`.
+        """
+        sx, sy, sz = (int(k) for k in self._strides)
+        flat = np.zeros(u.shape, dtype=np.int64)
+        fractions = []
+        inside = np.ones(u.shape, dtype=bool)
+        for coordinate, stride, count in zip((u, v, w), (sx, sy, sz), self.shape, strict=True):
+            inside &= (coordinate >= 0) & (coordinate <= count - 1)
+            base = np.clip(np.floor(coordinate), 0, count - 2)
+            fractions.append(coordinate - base)
+            flat += base.astype(np.int64) * stride
+        fx, fy, fz = fractions
+        values = self._flat
+
+        def lerp_z(offset):
+            lo = values[flat + offset]
+            return lo + (values[flat + offset + sz] - lo) * fz
+
+        c0 = lerp_z(0)
+        c0 += (lerp_z(sy) - c0) * fy
+        c1 = lerp_z(sx)
+        c1 += (lerp_z(sx + sy) - c1) * fy
+        result = c0 + (c1 - c0) * fx
+        result[~inside] = np.inf
+        return result
+
     def gradient(self, points) -> np.ndarray:
         """Gradient of the trilinear interpolant at ``points[..., 3]`` (unitless); 0 outside."""
         points = np.asarray(points, dtype=np.float64)
