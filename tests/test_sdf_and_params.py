@@ -94,3 +94,14 @@ def test_params_reject_bad_yaml_with_one_line_naming_it(tmp_path, text, message)
         SoftTrackingParams.from_yaml(path)
     assert "bad.yaml" in str(info.value)
     assert "\n" not in str(info.value)
+
+
+def test_cell_coordinate_lookup_matches_point_lookup(box_and_grid):
+    _, grid = box_and_grid
+    rng = np.random.default_rng(3)
+    points = rng.uniform(grid.lower - 0.01, grid.upper + 0.01, (5000, 3))
+    cells = ((points - grid.lower) / grid.resolution).astype(np.float32).T
+    fast, reference = grid.at_cell_coordinates(*cells), grid(points)
+    np.testing.assert_array_equal(np.isinf(fast), np.isinf(reference))
+    finite = np.isfinite(reference)
+    np.testing.assert_allclose(fast[finite], reference[finite], atol=1e-6)  # float32 rounding
