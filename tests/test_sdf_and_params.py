@@ -105,3 +105,24 @@ def test_cell_coordinate_lookup_matches_point_lookup(box_and_grid):
     np.testing.assert_array_equal(np.isinf(fast), np.isinf(reference))
     finite = np.isfinite(reference)
     np.testing.assert_allclose(fast[finite], reference[finite], atol=1e-6)  # float32 rounding
+
+
+@pytest.mark.parametrize("spread", [0.0, 0.002, 0.03])
+def test_deduplicated_penetration_sums_equal_the_per_particle_path(spread):
+    """Particles sharing most contacts (spread 0), a few variants, and all distinct."""
+    grid = GridSdf.build(CylinderSdf(0.02, 0.05), [-0.03, -0.03, -0.06], [0.03, 0.03, 0.06], 0.001)
+    rng = np.random.default_rng(11)
+    n_particles, n = 60, 40
+    base_points = rng.uniform(-0.1, 0.1, (3, 1, n)).astype(np.float32)
+    base_configs = rng.uniform(-0.1, 0.1, (3, 1, n)).astype(np.float32)
+    variants = rng.integers(0, 3, (n_particles, n))  # three candidate values per contact
+    shifts = rng.uniform(-spread, spread, (3, 3, 1, n)).astype(np.float32)
+    points = base_points + np.take_along_axis(shifts, variants[None, None], axis=1)[:, 0]
+    configs = base_configs + np.take_along_axis(shifts[::-1], variants[None, None], axis=1)[:, 0]
+    if spread == 0.03:
+        points = points + rng.uniform(-0.01, 0.01, points.shape).astype(np.float32)
+    fast = RobotPenetration(grid).excess_sums(points, configs, 0.002)
+    slow = RobotPenetration(grid, deduplicate=False).excess_sums(points, configs, 0.002)
+    assert slow[0].max() > 0.0  # the case has penetrating pairs
+    np.testing.assert_allclose(fast[0], slow[0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fast[1], slow[1], rtol=1e-9, atol=1e-12)

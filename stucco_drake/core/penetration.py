@@ -24,13 +24,16 @@ class RobotPenetration:
     Args:
         robot_sdf: signed distance of the robot in frame E (m, negative inside).
         pair_budget: (config, point) pairs per vectorised block; bounds scratch memory.
+        deduplicate: evaluate each distinct (config, point) value pair once when particles
+            share most of their contacts (as they do after resampling); the sums are the same.
     """
 
-    def __init__(self, robot_sdf: GridSdf, pair_budget: int = 1 << 20):
+    def __init__(self, robot_sdf: GridSdf, pair_budget: int = 1 << 20, deduplicate: bool = True):
         if not isinstance(robot_sdf, GridSdf):
             raise ValueError(f"robot_sdf: expected a GridSdf, got {type(robot_sdf).__name__}")
         self.robot_sdf = robot_sdf
         self.pair_budget = int(pair_budget)
+        self.deduplicate = bool(deduplicate)
         self._workspace: dict[str, np.ndarray] = {}
         self._crops: dict[float, tuple] = {}
 
@@ -114,6 +117,94 @@ class RobotPenetration:
         config_index, point_index = np.nonzero(possible)
         return config_index, point_index
 
+    @staticmethod
+    def _distinct_states(coordinates):
+        """Group equal columns entries across particles: (state ids, representatives) or None.
+
+        ``coordinates`` (3, n_particles, m): after resampling most particles hold identical
+        copies of a contact, so each column takes only a few distinct values. Returns
+        ``ids`` (n_particles, m), the state of each entry within its column, ``offsets`` (m,)
+        where each column's states start in a flat numbering and ``representative`` (total,)
+        a particle holding each state. Grouping hashes the float bits and is then verified
+        exactly; None when it fails (a hash collision, or NaN entries).
+        """
+        bits = np.ascontiguousarray(coordinates).view(np.uint32).astype(np.uint64)
+        key = bits[0] * np.uint64(0x9E3779B97F4A7C15)
+        key ^= bits[1] * np.uint64(0xC2B2AE3D27D4EB4F)
+        key ^= bits[2] * np.uint64(0x165667B19E3779F9)
+        order = np.argsort(key, axis=0, kind="stable")
+        sorted_key = np.take_along_axis(key, order, axis=0)
+        first = np.ones(sorted_key.shape, dtype=bool)
+        first[1:] = sorted_key[1:] != sorted_key[:-1]
+        rank = np.cumsum(first, axis=0) - 1
+        ids = np.empty(rank.shape, dtype=np.int64)
+        np.put_along_axis(ids, order, rank, axis=0)
+        counts = rank[-1] + 1
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        representative = order.T[first.T]  # column-major: column c's states in rank order
+        columns = np.arange(coordinates.shape[2])
+        held = coordinates[:, representative[offsets + ids], columns]
+        if not np.array_equal(held, coordinates):
+            return None
+        return ids, offsets, counts, representative
+
+    def _deduplicated_sums(self, points_e, configs_e, tolerance, crop):
+        """:meth:`excess_sums` evaluating each distinct (config, point) value pair once.
+
+        Returns None when the particles are too diverse for this to pay off (or a config is
+        skipped with NaN), and the caller takes the per-particle path.
+        """
+        n_particles, n_points = points_e.shape[1:]
+        point_states = self._distinct_states(points_e)
+        config_states = self._distinct_states(configs_e)
+        if point_states is None or config_states is None:
+            return None
+        p_ids, p_offsets, p_counts, p_rep = point_states
+        c_ids, c_offsets, c_counts, c_rep = config_states
+        grid = self.robot_sdf
+        origin_cells = grid.lower / grid.resolution
+        crop_lo, crop_values, _ = crop
+        config_of_pair, point_of_pair = self._candidate_pairs(
+            self._quantise(points_e, origin_cells + crop_lo, skip_nan=False),
+            self._quantise(configs_e, np.zeros(3), skip_nan=True),
+            np.array(crop_values.shape),
+        )
+        combos = c_counts[config_of_pair] * p_counts[point_of_pair]
+        total = int(combos.sum())
+        if total > n_particles * config_of_pair.size // 4:
+            return None
+        per_particle = np.zeros(n_particles)
+        per_point = np.zeros((n_particles, n_points))
+        if total == 0:
+            return per_particle, per_point
+        pair = np.repeat(np.arange(config_of_pair.size), combos)
+        local = np.arange(total) - np.repeat(np.cumsum(combos) - combos, combos)
+        config, point = config_of_pair[pair], point_of_pair[pair]
+        config_state, point_state = np.divmod(local, p_counts[point])
+        config_holder = c_rep[c_offsets[config] + config_state]
+        point_holder = p_rep[p_offsets[point] + point_state]
+        inverse_h = np.float32(1.0 / grid.resolution)
+        cells = [
+            (points_e[a, point_holder, point] - configs_e[a, config_holder, config]) * inverse_h
+            - np.float32(origin_cells[a])
+            for a in range(3)
+        ]
+        excess = np.maximum(-grid.at_cell_coordinates(*cells) - tolerance, 0.0)
+        hit = np.flatnonzero(excess > 0.0)
+        if hit.size == 0:
+            return per_particle, per_point
+        # Which particles hold each penetrating value pair: both entries in the right state.
+        holds = (c_ids[:, config[hit]] == config_state[hit]) & (
+            p_ids[:, point[hit]] == point_state[hit]
+        )
+        particle, which = np.nonzero(holds)
+        values = excess[hit][which].astype(np.float64)
+        per_particle += np.bincount(particle, values, minlength=n_particles)
+        per_point += np.bincount(
+            particle * n_points + point[hit][which], values, minlength=n_particles * n_points
+        ).reshape(n_particles, n_points)
+        return per_particle, per_point
+
     def excess_sums(self, points_e, configs_e, tolerance: float):
         """Sum, per particle and per point, the penetration beyond ``tolerance`` of every pair.
 
@@ -142,6 +233,10 @@ class RobotPenetration:
         crop_lo, crop_values, level = crop
         extent = np.array(crop_values.shape)
         grid = self.robot_sdf
+        if self.deduplicate and configs_e.shape[1] > 1:
+            sums = self._deduplicated_sums(points_e, configs_e, tolerance, crop)
+            if sums is not None:
+                return sums
         origin_cells = grid.lower / grid.resolution
         point_cells = self._quantise(points_e, origin_cells + crop_lo, skip_nan=False)
         config_cells = self._quantise(configs_e, np.zeros(3), skip_nan=True)
