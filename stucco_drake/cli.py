@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 
+from stucco_drake.bor_cli import add_diagram_command, add_run_command
 from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.scenes.cli_sim import add_sim_command
 
@@ -59,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(run=_demo)
     add_sim_command(commands)
     add_table_command(commands)
+    add_run_command(commands)
+    add_diagram_command(commands)
     return parser
 
 

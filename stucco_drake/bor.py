@@ -1,0 +1,355 @@
+"""The Blind Object Retrieval Diagram: a scene, proprioceptive contact sensing, STUCCO, ICP.
+
+:func:`build_bor_diagram` nests a scene's Diagram (plant, joint control, planar IK and action
+sequence; see :mod:`stucco_drake.scenes.builder`) and wires, every plant step,
+
+    robot state + applied torque -> ExternalWrenchEstimator -> ContactDetector
+    -> ContactIsolator (bubbles first, BubbleContactSensor; else the CPF)
+    -> ActionContactsAssembler -> SoftTrackingFilter -> TargetPoseEstimator
+
+so that the tracker and the pose estimator update once per action, on the scene's action
+clock. Only the bubble sensor and the ground-truth labeller read the plant's contact results;
+the wrench estimator sees the arm's state and torques alone. :func:`run_episode` (in
+:mod:`stucco_drake.bor_episode`) plays a scene through it and scores the result.
+
+Units: m, rad, s; poses in the world frame; quaternions w-first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import Box, Cylinder
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import ContactResults, MultibodyPlant
+from pydrake.multibody.tree import BodyIndex
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import MatrixGain
+
+from stucco_drake.core.baselines import make_tracker
+from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.gripper_sdf import gripper_penetration
+from stucco_drake.scenes import BuiltScene, SceneFile, build_scene, load_scene
+from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
+from stucco_drake.systems.action_contacts_assembler import ActionContactsAssembler, TruthContact
+from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
+from stucco_drake.systems.contact_detector import (
+    ContactDetector,
+    calibrate_residual_statistics,
+    default_threshold,
+)
+from stucco_drake.systems.contact_isolator import ContactIsolator, GripperPoseFromState
+from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
+from stucco_drake.systems.target_pose_estimator import TargetPoseEstimator
+from stucco_drake.systems.wrench_estimator import N_ARM, ExternalWrenchEstimator
+
+
+@dataclasses.dataclass
+class BorDiagram:
+    """The built BOR Diagram and handles into it.
+
+    Attributes:
+        diagram: the Diagram; it exports ``map_points``, ``segment_labels``, ``target_pose``,
+            ``estimate``, ``action_contacts``, ``action_truth`` and ``in_contact``.
+        scene: the nested scene (its ``diagram`` is the subsystem named ``scene``).
+        method, seed: the tracking method and the seed every random stream derives from.
+        target_name, target_shape: the target object and its known shape in its own frame.
+        penetration: the gripper's pxpen used by the tracker and the pose estimator.
+        estimator, detector, isolator, bubble_sensor, assembler, tracking, target_estimator,
+        truth: the systems.
+    """
+
+    diagram: Diagram
+    scene: BuiltScene
+    method: str
+    seed: int
+    target_name: str
+    target_shape: BoxSdf | CylinderSdf
+    penetration: RobotPenetration
+    estimator: ExternalWrenchEstimator
+    detector: ContactDetector
+    isolator: ContactIsolator
+    bubble_sensor: BubbleContactSensor
+    assembler: ActionContactsAssembler
+    tracking: SoftTrackingFilter
+    target_estimator: TargetPoseEstimator
+    truth: LeafSystem
+
+
+# ------------------------------------------------------------------------- scene geometry
+def collision_shapes(plant: MultibodyPlant, scene_graph, body) -> list:
+    """(sdf, X_BG) of each box or cylinder collision geometry of ``body``: the shape's signed
+    distance in its geometry frame G (m) and G's pose in the body frame. Other shapes are
+    skipped (the scenes' objects are made of boxes and cylinders)."""
+    inspector = scene_graph.model_inspector()
+    shapes = []
+    for gid in plant.GetCollisionGeometriesForBody(body):
+        shape = inspector.GetShape(gid)
+        if isinstance(shape, Box):
+            sdf = BoxSdf((shape.width() / 2, shape.depth() / 2, shape.height() / 2))
+        elif isinstance(shape, Cylinder):
+            sdf = CylinderSdf(shape.radius(), shape.length() / 2)
+        else:
+            continue
+        shapes.append((sdf, inspector.GetPoseInFrame(gid)))
+    return shapes
+
+
+def _volume(sdf) -> float:
+    if isinstance(sdf, BoxSdf):
+        return 8.0 * float(np.prod(sdf.half_extents))
+    return 2.0 * np.pi * sdf.radius**2 * sdf.half_height
+
+
+def target_shape(built: BuiltScene) -> BoxSdf | CylinderSdf:
+    """The scene target's known shape in its body frame: its largest collision box or cylinder
+    (centre offset kept; the geometry must not be rotated relative to the body but about z)."""
+    body = built.free_bodies[built.scene.target]
+    shapes = collision_shapes(built.plant, built.scene_graph, body)
+    if not shapes:
+        raise ValueError(f"target {built.scene.target!r} has no box or cylinder collision shape")
+    sdf, X_BG = max(shapes, key=lambda s: _volume(s[0]))
+    if isinstance(sdf, CylinderSdf):
+        return CylinderSdf(sdf.radius, sdf.half_height, tuple(map(float, X_BG.translation())))
+    if not np.allclose(X_BG.rotation().matrix(), np.eye(3), atol=1e-9):
+        raise ValueError(f"target {built.scene.target!r}: its box is rotated in its body frame")
+    return BoxSdf(sdf.half_extents, tuple(map(float, X_BG.translation())))
+
+
+@dataclasses.dataclass(frozen=True)
+class PosedSurface:
+    """Signed distance (m) of a primitive shape placed at X_WG in the world; picklable."""
+
+    sdf: BoxSdf | CylinderSdf
+    X_GW: np.ndarray  # 4x4
+
+    def __call__(self, points) -> np.ndarray:
+        points = np.asarray(points, dtype=np.float64)
+        return self.sdf(points @ self.X_GW[:3, :3].T + self.X_GW[:3, 3])
+
+
+def object_surfaces(built: BuiltScene, plant_context) -> dict[str, list[PosedSurface]]:
+    """name -> the collision surfaces of every object standing on the table (free objects and
+    walls; not the table itself) at the poses in ``plant_context``, for the contact error."""
+    surfaces = {}
+    for name, body in {**built.free_bodies, **built.welded_bodies}.items():
+        X_WB = body.EvalPoseInWorld(plant_context)
+        posed = [
+            PosedSurface(sdf, X_WB.multiply(X_BG).inverse().GetAsMatrix4())
+            for sdf, X_BG in collision_shapes(built.plant, built.scene_graph, body)
+        ]
+        # The table (its top at z = 0, its centre below) is no object the robot rummages among.
+        if posed and max(np.linalg.inv(s.X_GW)[2, 3] for s in posed) > 0.0:
+            surfaces[name] = posed
+    return surfaces
+
+
+# ------------------------------------------------------------------- observers of the plant
+class BodyPosesFromState(LeafSystem):
+    """Body poses (list of RigidTransform, indexed by BodyIndex) from the full plant state.
+
+    The bubble sensor needs the bubbles' poses, which the scene does not export; this
+    recomputes them by forward kinematics on a scratch context of the same plant.
+    """
+
+    def __init__(self, plant: MultibodyPlant):
+        super().__init__()
+        self._plant = plant
+        self._context = plant.CreateDefaultContext()
+        self._bodies = [plant.get_body(BodyIndex(i)) for i in range(plant.num_bodies())]
+        self._state = self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
+        self.DeclareAbstractOutputPort(
+            "body_poses", lambda: AbstractValue.Make([RigidTransform()]), self._calc
+        )
+
+    def _calc(self, context, output):
+        self._plant.SetPositionsAndVelocities(self._context, self._state.Eval(context))
+        output.set_value([b.EvalPoseInWorld(self._context) for b in self._bodies])
+
+
+class RobotObjectContacts(LeafSystem):
+    """Ground truth for evaluation: the robot's contacts with objects, from contact results.
+
+    Output ``truth_contacts``: list of :class:`TruthContact`, one per contact between a robot
+    body (arm or gripper) and an object body (m, world), the latter named as in
+    ``BuiltScene.free_bodies``/``welded_bodies``.
+    """
+
+    def __init__(self, built: BuiltScene):
+        super().__init__()
+        plant = built.plant
+        names = {b.index(): n for n, b in {**built.free_bodies, **built.welded_bodies}.items()}
+        robot = {plant.GetModelInstanceByName(n) for n in (IIWA, GRIPPER)}
+        self._robot_geometry, self._object_geometry = set(), {}
+        for i in range(plant.num_bodies()):
+            body = plant.get_body(BodyIndex(i))
+            for gid in plant.GetCollisionGeometriesForBody(body):
+                if body.model_instance() in robot:
+                    self._robot_geometry.add(gid)
+                elif body.index() in names:
+                    self._object_geometry[gid] = names[body.index()]
+        self._results = self.DeclareAbstractInputPort(
+            "contact_results", AbstractValue.Make(ContactResults())
+        )
+        self.DeclareAbstractOutputPort(
+            "truth_contacts", lambda: AbstractValue.Make([TruthContact("", np.zeros(3))]),
+            self._calc,
+        )  # fmt: skip
+
+    def _pair(self, a, b) -> str | None:
+        if a in self._robot_geometry:
+            return self._object_geometry.get(b)
+        if b in self._robot_geometry:
+            return self._object_geometry.get(a)
+        return None
+
+    def _calc(self, context, output):
+        results = self._results.Eval(context)
+        found = []
+        for i in range(results.num_hydroelastic_contacts()):
+            surface = results.hydroelastic_contact_info(i).contact_surface()
+            name = self._pair(surface.id_M(), surface.id_N())
+            if name is not None:
+                found.append(TruthContact(name, np.array(surface.centroid())))
+        for i in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(i)
+            name = self._pair(info.point_pair().id_A, info.point_pair().id_B)
+            if name is not None:
+                found.append(TruthContact(name, np.array(info.contact_point())))
+        output.set_value(found)
+
+
+# --------------------------------------------------------------------------------- building
+def _arm_selectors(robot_plant: MultibodyPlant):
+    """(S, T): arm state [q; v] (14) = S x_robot, arm torques (7) = T tau_robot."""
+    arm = robot_plant.GetModelInstanceByName(IIWA)
+    nq, nv = robot_plant.num_positions(), robot_plant.num_velocities()
+    S, T = np.zeros((2 * N_ARM, nq + nv)), np.zeros((N_ARM, nv))
+    joints = [robot_plant.get_joint(j) for j in robot_plant.GetJointIndices(arm)]
+    joints = sorted((j for j in joints if j.num_velocities() == 1), key=lambda j: j.name())
+    for k, joint in enumerate(joints):  # iiwa_joint_1 .. iiwa_joint_7 sort in order
+        S[k, joint.position_start()] = 1.0
+        S[N_ARM + k, nq + joint.velocity_start()] = 1.0
+        T[k, joint.velocity_start()] = 1.0
+    return S, T
+
+
+def _seeds(seed: int) -> list[int]:
+    """Independent integer seeds of the tracker, the ICP restarts and the CPF from one seed."""
+    return [int(s) for s in np.random.SeedSequence(seed).generate_state(3)]
+
+
+def build_bor_diagram(
+    scene: SceneFile | str,
+    method: str = "stucco",
+    seed: int = 0,
+    *,
+    meshcat=None,
+    tracker_params=None,
+    threshold: float | None = None,
+    estimator_gain: float = 50.0,
+) -> BorDiagram:
+    """Builds the BOR Diagram of ``scene`` (a SceneFile or a scene name) with ``method``.
+
+    Args:
+        scene: the scene.
+        method: a tracker name of :func:`~stucco_drake.core.baselines.make_tracker`.
+        seed: seed of every random stream (tracker, ICP restarts, CPF).
+        meshcat: draw the scene to this Meshcat (None: no drawing).
+        tracker_params: the method's parameters; default the scene's for STUCCO (its
+            ``tracker_preset`` and overrides), the paper's for the baselines.
+        threshold: detection threshold on the chi-square statistic (default
+            :func:`~stucco_drake.systems.contact_detector.default_threshold`).
+        estimator_gain: the momentum observer's bandwidth K_O (1/s).
+    """
+    scene = load_scene(scene) if isinstance(scene, str) else scene
+    built = build_scene(scene, meshcat=meshcat)
+    h = float(scene.plant.time_step)
+    fingers = np.full(2, scene.gripper_start.finger_position)
+    X_WB = robot_base_pose(scene)
+    tracker_seed, icp_seed, cpf_seed = _seeds(seed)
+    if method == "stucco" and tracker_params is None:
+        tracker_params = scene.tracker_params()
+    penetration = gripper_penetration(opening=scene.gripper_start.finger_position)
+    shape = target_shape(built)
+
+    builder = DiagramBuilder()
+    sub = builder.AddNamedSystem("scene", built.diagram)
+    S, T = _arm_selectors(built.robot_plant)
+    arm_state = builder.AddNamedSystem("arm_state", MatrixGain(S))
+    arm_torque = builder.AddNamedSystem("arm_torque", MatrixGain(T))
+    builder.Connect(sub.GetOutputPort("robot_state"), arm_state.get_input_port())
+    builder.Connect(sub.GetOutputPort("applied_torque"), arm_torque.get_input_port())
+
+    stats = calibrate_residual_statistics(time_step=h, estimator_kwargs={"gain": estimator_gain})
+    estimator = builder.AddNamedSystem("wrench_estimator", ExternalWrenchEstimator(
+        h, gain=estimator_gain, X_WB=X_WB, finger_positions=fingers, residual_statistics=stats,
+        # The scene's ports decide which torque goes with which state (estimator's Timing).
+        sampled_plant_outputs=bool(scene.plant.use_sampled_output_ports),
+    ))  # fmt: skip
+    builder.Connect(arm_state.get_output_port(), estimator.GetInputPort("state"))
+    builder.Connect(arm_torque.get_output_port(), estimator.GetInputPort("applied_torque"))
+
+    detector = builder.AddNamedSystem("contact_detector", ContactDetector(
+        h, default_threshold() if threshold is None else threshold
+    ))  # fmt: skip
+    for name in ("residual_chi2", "ee_position"):
+        builder.Connect(estimator.GetOutputPort(name), detector.GetInputPort(name))
+    builder.Connect(sub.GetOutputPort("action_index"), detector.GetInputPort("action_index"))
+
+    pose = builder.AddNamedSystem(
+        "gripper_pose", GripperPoseFromState(X_WB=X_WB, finger_positions=fingers)
+    )
+    builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
+    body_poses = builder.AddNamedSystem("body_poses", BodyPosesFromState(built.plant))
+    builder.Connect(sub.GetOutputPort("plant_state"), body_poses.GetInputPort("plant_state"))
+    bubbles = builder.AddNamedSystem(
+        "bubble_sensor", BubbleContactSensor(built.plant, built.scene_graph, h)
+    )
+    builder.Connect(sub.GetOutputPort("contact_results"), bubbles.GetInputPort("contact_results"))
+    builder.Connect(body_poses.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))
+
+    isolator = builder.AddNamedSystem("contact_isolator", ContactIsolator(
+        h, seed=cpf_seed, opening=scene.gripper_start.finger_position, n_bubbles=2
+    ))  # fmt: skip
+    builder.Connect(estimator.GetOutputPort("ee_wrench"), isolator.GetInputPort("ee_wrench"))
+    builder.Connect(pose.GetOutputPort("gripper_pose"), isolator.GetInputPort("gripper_pose"))
+    builder.Connect(detector.GetOutputPort("in_contact"), isolator.GetInputPort("in_contact"))
+    for name in ("bubble_in_contact", "bubble_contact_points"):
+        builder.Connect(bubbles.GetOutputPort(name), isolator.GetInputPort(name))
+
+    truth = builder.AddNamedSystem("ground_truth", RobotObjectContacts(built))
+    builder.Connect(sub.GetOutputPort("contact_results"), truth.GetInputPort("contact_results"))
+    assembler = builder.AddNamedSystem(
+        "action_contacts", ActionContactsAssembler(h, with_truth=True)
+    )
+    for name in ("current_action", "completed_action"):
+        builder.Connect(detector.GetOutputPort(name), assembler.GetInputPort(name))
+    for name in ("has_contact", "contact_points"):
+        builder.Connect(isolator.GetOutputPort(name), assembler.GetInputPort(name))
+    builder.Connect(pose.GetOutputPort("gripper_pose"), assembler.GetInputPort("gripper_pose"))
+    builder.Connect(truth.GetOutputPort("truth_contacts"), assembler.GetInputPort("truth_contacts"))
+
+    tracker = make_tracker(method, tracker_params, penetration)
+    tracking = builder.AddNamedSystem("soft_tracking", SoftTrackingFilter(tracker, tracker_seed, h))
+    for name in ("ee_pose", "action_contacts"):
+        builder.Connect(assembler.GetOutputPort(name), tracking.GetInputPort(name))
+    target = builder.AddNamedSystem(
+        "target_pose_estimator", TargetPoseEstimator(shape, penetration, icp_seed, h)
+    )
+    builder.Connect(assembler.GetOutputPort("ee_pose"), target.GetInputPort("ee_pose"))
+    for name in ("map_points", "segment_labels", "tracked_action"):
+        builder.Connect(tracking.GetOutputPort(name), target.GetInputPort(name))
+
+    for system, name in ((tracking, "map_points"), (tracking, "segment_labels"),
+                         (target, "target_pose"), (target, "estimate"),
+                         (assembler, "action_contacts"), (assembler, "action_truth"),
+                         (detector, "in_contact")):  # fmt: skip
+        builder.ExportOutput(system.GetOutputPort(name), name)
+    diagram = builder.Build()
+    diagram.set_name(f"bor_{scene.name}_{method}")
+    return BorDiagram(diagram, built, method, int(seed), scene.target, shape, penetration,
+                      estimator, detector, isolator, bubbles, assembler, tracking, target, truth)

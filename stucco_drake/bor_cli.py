@@ -1,0 +1,202 @@
+"""The ``stucco-drake run`` and ``stucco-drake diagram`` subcommands (Blind Object Retrieval).
+
+``run`` plays a scene through the BOR Diagram and prints one result line; ``diagram`` writes the
+Diagram's wiring as Graphviz source (and an SVG when Graphviz's ``dot`` is installed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+
+#: Nesting depth of the wiring picture: the scene Diagram stays one box.
+DIAGRAM_DEPTH = 1
+
+
+# ------------------------------------------------------------------------------------- run
+def add_run_command(subparsers) -> None:
+    """Adds ``run`` to the CLI's subparsers."""
+    from stucco_drake.core.baselines import TRACKER_NAMES
+
+    run = subparsers.add_parser("run", help="rummage a scene blind, track contacts, estimate "
+                                            "the target's pose; print GS, CE, FMI")  # fmt: skip
+    run.add_argument("--scene", required=True,
+                     help="scene name (diagrams/<name>.yaml, e.g. FB) or a scene file path")
+    run.add_argument("--method", default="stucco", choices=TRACKER_NAMES)
+    run.add_argument("--seed", type=int, default=0, help="seed of every random stream")
+    run.add_argument("--actions", type=int, default=None,
+                     help="play only the first N actions (default: all)")
+    run.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
+    run.add_argument("--record", metavar="OUT.html",
+                     help="save a standalone Meshcat HTML recording of the run")
+    run.add_argument("--no-grasp", action="store_true",
+                     help="skip the final grasp (GS prints n/a)")
+    run.add_argument("--plot", metavar="OUT.png",
+                     help="plot the tracked points by segment over the true object outlines")
+    run.set_defaults(run=run_bor)  # fmt: skip
+
+
+def _grasp_hook(enabled: bool):
+    """The grasp hook when grasping is asked for and the grasp module is present, else None
+    (GS prints n/a)."""
+    if not enabled:
+        return None
+    try:
+        import stucco_drake.grasp  # noqa: F401
+    except ImportError:
+        print("grasp: stucco_drake.grasp is not available, GS is n/a", file=sys.stderr)
+        return None
+    from stucco_drake.bor_episode import executor_grasp
+
+    return executor_grasp
+
+
+def run_bor(args: argparse.Namespace) -> int:
+    from stucco_drake.bor_episode import run_episode
+    from stucco_drake.scenes import SceneFileError, load_scene
+
+    try:
+        scene = load_scene(args.scene)
+    except SceneFileError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    meshcat = None
+    if args.meshcat or args.record:
+        from pydrake.geometry import Meshcat, MeshcatParams
+
+        # Bound to this machine only; a recording alone needs no viewer.
+        meshcat = Meshcat(MeshcatParams(host="localhost"))
+        if args.meshcat:
+            print(f"meshcat: {meshcat.web_url()}", flush=True)
+        if args.record:
+            meshcat.StartRecording(set_visualizations_while_recording=bool(args.meshcat))
+    result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
+                         grasp=_grasp_hook(not args.no_grasp))  # fmt: skip
+    print(result.summary())
+    if args.record:
+        meshcat.StopRecording()
+        meshcat.PublishRecording()
+        Path(args.record).write_text(meshcat.StaticHtml())
+        print(f"recording: {args.record}")
+    if args.plot:
+        plot_episode(result, args.plot)
+        print(f"plot: {args.plot}")
+    return 0
+
+
+def _outline(surface, n: int = 64) -> np.ndarray:
+    """(k, 2) top-view outline (m, world) of a posed box or cylinder."""
+    from stucco_drake.core.shapes import BoxSdf
+
+    X_WG = np.linalg.inv(surface.X_GW)
+    centre = np.asarray(surface.sdf.center, dtype=float)
+    if isinstance(surface.sdf, BoxSdf):
+        hx, hy, _ = surface.sdf.half_extents
+        local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy], [-hx, -hy]])
+    else:
+        angle = np.linspace(0.0, 2 * np.pi, n)
+        local = surface.sdf.radius * np.c_[np.cos(angle), np.sin(angle)]
+    local = np.c_[local, np.zeros(len(local))] + centre
+    return (local @ X_WG[:3, :3].T + X_WG[:3, 3])[:, :2]
+
+
+def plot_episode(result, path: str | Path) -> None:
+    """Top view: true object outlines at their final poses (grey; the target black), tracked
+    points coloured by segment, and the estimated target outline (blue, dashed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from stucco_drake.bor import PosedSurface
+
+    fig, ax = plt.subplots(figsize=(6, 6))
+    for name, group in result.surfaces.items():
+        target = name == result.scene_target
+        for surface in group:
+            xy = _outline(surface)
+            ax.plot(xy[:, 0], xy[:, 1], color="k" if target else "0.6", lw=1.5 if target else 1)
+    points, labels = result.map_points, np.asarray(result.labels)
+    if len(points):
+        ax.scatter(points[:, 0], points[:, 1], c=labels, cmap="tab10", marker="x", s=30,
+                   vmin=0, vmax=9, label="tracked contacts")  # fmt: skip
+    if result.estimate is not None and result.target_shape is not None:
+        e = result.estimate
+        c, s = np.cos(e.yaw), np.sin(e.yaw)
+        X_WO = np.array([[c, -s, 0, e.x], [s, c, 0, e.y], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        xy = _outline(PosedSurface(result.target_shape, np.linalg.inv(X_WO)))
+        ax.plot(xy[:, 0], xy[:, 1], "b--", lw=1.5, label="estimated target")
+    # Frame the clutter (free objects and tracked points), not the walls around it.
+    near = [xy[:2] for xy in result.object_poses.values()] + [p[:2] for p in points]
+    low, high = np.min(near, axis=0) - 0.12, np.max(near, axis=0) + 0.12
+    ax.set_xlim(low[0], high[0])
+    ax.set_ylim(low[1], high[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"{result.scene} {result.method} seed {result.seed}: CE {result.ce_cm:.2f} cm, "
+                 f"FMI {result.fmi:.2f}")  # fmt: skip
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------------- diagram
+def add_diagram_command(subparsers) -> None:
+    """Adds ``diagram`` to the CLI's subparsers."""
+    diagram = subparsers.add_parser("diagram", help="write the BOR Diagram's wiring picture")
+    diagram.add_argument("--scene", default="FB", help="scene name or scene file path")
+    diagram.add_argument("--method", default="stucco")
+    diagram.add_argument("--out", default="diagrams/bor.svg",
+                         help="output .svg (also writes the .dot source next to it) or .dot")
+    diagram.set_defaults(run=run_diagram)  # fmt: skip
+
+
+def normalized_graphviz(text: str) -> str:
+    """Graphviz source with Drake's per-process system ids renumbered by first appearance and
+    the edges sorted (Drake lists them in hash order), so the same wiring gives the same text."""
+    ids: dict[str, str] = {}
+
+    def renumber(match: re.Match) -> str:
+        return match.group(1) + ids.setdefault(match.group(2), str(len(ids)))
+
+    lines = re.sub(r"(digraph _|clusters|cluster|\bs)(\d+)", renumber, text).splitlines()
+    edges = [i for i, line in enumerate(lines) if " -> " in line]
+    for i, line in zip(edges, sorted(lines[i] for i in edges), strict=True):
+        lines[i] = line
+    return "\n".join(lines) + "\n"
+
+
+def bor_graphviz(scene: str = "FB", method: str = "stucco") -> str:
+    """The normalized Graphviz source of the BOR Diagram of ``scene``."""
+    from stucco_drake.bor import build_bor_diagram
+
+    diagram = build_bor_diagram(scene, method).diagram
+    return normalized_graphviz(diagram.GetGraphvizString(max_depth=DIAGRAM_DEPTH))
+
+
+def run_diagram(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    source = bor_graphviz(args.scene, args.method)
+    dot_path = out.with_suffix(".dot")
+    dot_path.parent.mkdir(parents=True, exist_ok=True)
+    dot_path.write_text(source)
+    print(f"graphviz source: {dot_path}")
+    if out.suffix == ".dot":
+        return 0
+    if shutil.which("dot") is None:
+        print("graphviz 'dot' not found: no SVG written (render the .dot source elsewhere)",
+              file=sys.stderr)  # fmt: skip
+        return 1
+    import pydot
+
+    (graph,) = pydot.graph_from_dot_data(source)
+    graph.write_svg(str(out))
+    print(f"picture: {out}")
+    return 0

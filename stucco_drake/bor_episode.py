@@ -1,0 +1,211 @@
+"""One Blind Object Retrieval episode: rummage a scene through the BOR Diagram, then score it.
+
+Units: m, rad, s; positions and poses in the world frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+
+from stucco_drake.bor import BorDiagram, build_bor_diagram, object_surfaces
+from stucco_drake.core.metrics import contact_error, fowlkes_mallows
+from stucco_drake.scenes import SceneFile, load_scene
+from stucco_drake.scenes.builder import yaw_of
+
+#: ``grasp(bor, simulator, estimate) -> result``, called once rummaging is over; a result with
+#: a ``success`` attribute (or a bool) fills :attr:`EpisodeResult.grasp_success`.
+GraspHook = Callable[[BorDiagram, Simulator, object], object]
+
+#: Plant steps past an action's end until its estimate exists: the detector closes the action,
+#: the assembler forms its contacts, the filter updates, the pose estimator runs (one each),
+#: plus one because a Simulator stopped at t has not yet run the updates due at t.
+_PIPELINE_STEPS = 5
+
+
+def executor_grasp(bor: BorDiagram, simulator: Simulator, estimate):
+    """The grasp hook of the BOR task: grasp at the estimated target pose with
+    :func:`stucco_drake.grasp.execute_grasp` (which continues from the simulator's state in a
+    scene of its own). Without an estimate there is nothing to grasp: returns False."""
+    from stucco_drake.grasp import execute_grasp
+
+    if estimate is None:
+        return False
+    pose = (estimate.x, estimate.y, estimate.yaw)
+    return execute_grasp(bor.scene, simulator, pose, bor.target_shape)
+
+
+def action_stop_time(scene: SceneFile, k: int) -> float:
+    """When (s) :func:`run_episode` stops to read action k's results."""
+    return (k + 1) * scene.action_duration + _PIPELINE_STEPS * float(scene.plant.time_step)
+
+
+def make_bor_simulator(bor: BorDiagram, context=None) -> Simulator:
+    """A Simulator of ``bor.diagram`` (from ``context``, e.g. a clone, or the default one).
+
+    The joint controller's integral term is the Diagram's only continuous state. An
+    error-controlled integrator adapts its step from its own history, which a context does not
+    hold, so a cloned context would re-run differently; a fixed step of the plant's time step
+    (the events bound the steps anyway) makes every re-run from a clone identical, provided it
+    stops at the same times (:func:`action_stop_time`).
+    """
+    simulator = Simulator(bor.diagram, context) if context is not None else Simulator(bor.diagram)
+    integrator = simulator.get_mutable_integrator()
+    integrator.set_fixed_step_mode(True)
+    integrator.set_maximum_step_size(float(bor.scene.scene.plant.time_step))
+    simulator.Initialize()
+    return simulator
+
+
+@dataclasses.dataclass
+class EpisodeResult:
+    """What one episode produced and how well.
+
+    Attributes:
+        scene, method, seed: what ran; n_actions: the actions played.
+        scene_target, target_shape: the target's name and known shape (in its own frame).
+        map_points: (n, 3) tracked contact points at the end (m, world).
+        labels: (n,) their segment labels (the tracker's; -1 = noise for DBSCAN).
+        truth_labels: (n,) the object each point was truly sensed on ("" = none known).
+        isolation_errors: (n,) distance (m) from each sensed point to the nearest true contact
+            at the step it was sensed (NaN when none); the points as sensed, before tracking.
+        contacts_per_action: (n_actions,) number of contact points each action gave.
+        detected_actions: actions the detector judged in contact.
+        object_poses: name -> (x, y, z, yaw) of every free object at the end (m, rad).
+        surfaces: name -> the object's :class:`~stucco_drake.bor.PosedSurface` list at the end.
+        estimate: the target-pose estimator's :class:`TargetPoseEstimate` (None if none).
+        target_pose_true: (x, y, yaw) of the target at the end (m, rad).
+        ce_cm: contact error (cm) against the true object surfaces at their final poses.
+        fmi: Fowlkes-Mallows index of the labels against the truth (points with known truth).
+        grasp: the grasp hook's result (None without a hook); grasp_success its success.
+        wall_time_s: wall-clock time of the simulation (s); sim_time_s the simulated time.
+    """
+
+    scene: str
+    method: str
+    seed: int
+    n_actions: int
+    scene_target: str
+    target_shape: object
+    map_points: np.ndarray
+    labels: np.ndarray
+    truth_labels: np.ndarray
+    isolation_errors: np.ndarray
+    contacts_per_action: np.ndarray
+    detected_actions: int
+    object_poses: dict
+    surfaces: dict
+    estimate: object
+    target_pose_true: np.ndarray
+    ce_cm: float
+    fmi: float
+    grasp: object
+    grasp_success: bool | None
+    wall_time_s: float
+    sim_time_s: float
+
+    def summary(self) -> str:
+        """One line: grasp success (or n/a), CE, FMI, contacts and wall time."""
+        gs = "n/a" if self.grasp_success is None else ("yes" if self.grasp_success else "no")
+        iso = np.nanmedian(self.isolation_errors) * 100 if np.isfinite(
+            self.isolation_errors).any() else float("nan")  # fmt: skip
+        return (
+            f"{self.scene} {self.method} seed {self.seed}: GS {gs}, CE {self.ce_cm:.2f} cm, "
+            f"FMI {self.fmi:.3f}, {len(self.map_points)} contacts in {self.n_actions} actions "
+            f"(median isolation error {iso:.2f} cm), wall {self.wall_time_s:.1f} s"
+        )
+
+
+def _with_singletons(labels: np.ndarray) -> np.ndarray:
+    """Noise labels (-1) become one cluster each, the way the paper scores DBSCAN's noise."""
+    labels = np.asarray(labels, dtype=np.int64).copy()
+    noise = labels < 0
+    labels[noise] = labels.max(initial=0) + 1 + np.arange(noise.sum())
+    return labels
+
+
+def score(points, labels, truth_names, surfaces) -> tuple[float, float]:
+    """(CE in cm, FMI) of tracked ``points`` (n, 3) with ``labels`` against ``truth_names``
+    (n,) and the true ``surfaces`` (callables, m); NaN when undefined (no points; FMI: fewer
+    than two points of known truth)."""
+    ce = fmi = float("nan")
+    if len(points):
+        ce = 100.0 * contact_error(points, surfaces)
+        known = np.asarray(truth_names) != ""
+        if known.sum() >= 2:  # FMI counts pairs: one point has none
+            fmi = fowlkes_mallows(np.asarray(truth_names)[known], _with_singletons(labels)[known])
+    return ce, fmi
+
+
+def run_episode(
+    scene: SceneFile | str,
+    method: str = "stucco",
+    seed: int = 0,
+    n_actions: int | None = None,
+    *,
+    bor: BorDiagram | None = None,
+    simulator: Simulator | None = None,
+    meshcat=None,
+    grasp: GraspHook | None = None,
+    on_action: Callable[[int, object], None] | None = None,
+) -> EpisodeResult:
+    """Plays the first ``n_actions`` actions of ``scene`` (all by default) through the BOR
+    Diagram (``bor``, or one built for ``method`` and ``seed``), then scores the tracking.
+    ``simulator`` (of ``bor.diagram`` at time 0, default :func:`make_bor_simulator`) may be
+    given, e.g. to clone its context midway.
+
+    ``on_action(k, action_contacts)`` is called after each action's contacts are formed;
+    ``grasp`` (see :data:`GraspHook`) after the last action's pose estimate.
+    """
+    scene = load_scene(scene) if isinstance(scene, str) else scene
+    bor = bor or build_bor_diagram(scene, method, seed, meshcat=meshcat)
+    total = len(scene.actions)
+    n_actions = total if n_actions is None else min(int(n_actions), total)
+    if simulator is None:
+        simulator = make_bor_simulator(bor)
+    context = simulator.get_mutable_context()
+    truth, counts = [], []
+    start = time.perf_counter()
+    for k in range(n_actions):
+        simulator.AdvanceTo(action_stop_time(scene, k))
+        contacts = bor.diagram.GetOutputPort("action_contacts").Eval(context)
+        if contacts.action_index != k:
+            raise RuntimeError(f"action {k}: the assembler reports {contacts.action_index}")
+        action_truth = bor.diagram.GetOutputPort("action_truth").Eval(context)
+        truth.extend((contacts.points[i], action_truth[i]) for i in range(len(contacts.points)))
+        counts.append(len(contacts.points))
+        if on_action is not None:
+            on_action(k, contacts)
+    wall = time.perf_counter() - start
+
+    points = np.asarray(bor.diagram.GetOutputPort("map_points").Eval(context))
+    labels = np.asarray(bor.diagram.GetOutputPort("segment_labels").Eval(context))
+    estimate = bor.diagram.GetOutputPort("estimate").Eval(context)
+    names = np.array([t.name for _, t in truth], dtype=object).astype(str)
+    errors = np.array([np.linalg.norm(p - t.point) for p, t in truth])
+    built = bor.scene
+    plant_context = built.plant.GetMyContextFromRoot(context)
+    poses = {}
+    for name, body in built.free_bodies.items():
+        X = body.EvalPoseInWorld(plant_context)
+        poses[name] = np.array([*X.translation(), yaw_of(X.rotation())])
+    assembler_context = bor.assembler.GetMyContextFromRoot(context)
+    missed = bor.assembler.assembler_state(assembler_context).detected_without_point
+    detected = int(np.count_nonzero(counts)) + missed
+    by_object = object_surfaces(built, plant_context)
+    surfaces = [s for group in by_object.values() for s in group]
+    ce, fmi = score(points, labels, names, surfaces)
+    target = poses[scene.target]
+    result = grasp(bor, simulator, estimate) if grasp is not None else None
+    success = result if isinstance(result, bool) or result is None else bool(
+        getattr(result, "success", False))  # fmt: skip
+    return EpisodeResult(
+        scene.name, bor.method, bor.seed, n_actions, scene.target, bor.target_shape, points,
+        labels, names, errors,
+        np.array(counts), detected, poses, by_object, estimate, target[[0, 1, 3]], ce, fmi,
+        result, success, wall, context.get_time(),
+    )  # fmt: skip

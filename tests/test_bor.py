@@ -1,0 +1,161 @@
+"""The Blind Object Retrieval Diagram end to end, its action-contact assembly and its picture."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+
+from stucco_drake.core.detection import ActionContact
+from stucco_drake.systems.action_contacts_assembler import ActionContactsAssembler, TruthContact
+
+DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
+H = 0.01  # s, the scripted tests' step
+N_SHORT = 8  # actions of the shortened FB run
+
+
+class ScriptedSensing(LeafSystem):
+    """Detector and isolator outputs from a script: action k spans [k, k + 1) s; the isolator
+    reports point (k, t, 0) at every step of action k's second half (in contact), one truth
+    contact named "obj" at the same place, dx = (0.01 k, 0, 0) per completed action."""
+
+    def __init__(self, in_contact_actions):
+        super().__init__()
+        self._contact = set(in_contact_actions)
+        self.DeclareAbstractOutputPort("current_action",
+                                       lambda: AbstractValue.Make(ActionContact()), self._current)
+        self.DeclareAbstractOutputPort("completed_action",
+                                       lambda: AbstractValue.Make(ActionContact()), self._done)
+        self.DeclareVectorOutputPort("has_contact", 1, self._flag)
+        self.DeclareAbstractOutputPort("contact_points",
+                                       lambda: AbstractValue.Make([np.zeros(3)]), self._points)
+        self.DeclareVectorOutputPort("gripper_pose", 7,
+                                     lambda c, o: o.SetFromVector([c.get_time(), 0, 0, 1, 0, 0, 0]))
+        self.DeclareAbstractOutputPort(
+            "truth_contacts", lambda: AbstractValue.Make([TruthContact("", np.zeros(3))]),
+            lambda c, o: o.set_value([TruthContact("obj", self._point(c))]),
+        )  # fmt: skip
+
+    @staticmethod
+    def _k(context) -> int:
+        return int(np.floor(context.get_time() + 1e-9))
+
+    def _point(self, context):
+        return np.array([self._k(context), context.get_time(), 0.0])
+
+    def _touching(self, context) -> bool:
+        t = context.get_time()
+        return self._k(context) in self._contact and t - self._k(context) >= 0.5
+
+    def _current(self, context, output):
+        output.set_value(ActionContact(self._k(context), False, np.zeros(3), 0))
+
+    def _done(self, context, output):
+        k = self._k(context) - 1
+        output.set_value(ActionContact(k, k in self._contact, np.array([0.01 * k, 0, 0]), 5))
+
+    def _flag(self, context, output):
+        output.SetFromVector([float(self._touching(context))])
+
+    def _points(self, context, output):
+        output.set_value([self._point(context)] if self._touching(context) else [])
+
+
+def test_assembler_latches_the_last_contact_of_each_action():
+    builder = DiagramBuilder()
+    source = builder.AddSystem(ScriptedSensing(in_contact_actions=[1, 3]))
+    assembler = builder.AddSystem(ActionContactsAssembler(H, with_truth=True))
+    for name in ("current_action", "completed_action", "has_contact", "contact_points",
+                 "gripper_pose", "truth_contacts"):  # fmt: skip
+        builder.Connect(source.GetOutputPort(name), assembler.GetInputPort(name))
+    simulator = Simulator(builder.Build())
+    context = assembler.GetMyContextFromRoot(simulator.get_context())
+    seen = {}
+    for k in range(4):
+        simulator.AdvanceTo(k + 1 + 2 * H)
+        seen[k] = assembler.GetOutputPort("action_contacts").Eval(context)
+        truth = assembler.GetOutputPort("action_truth").Eval(context)
+        assert [t.name for t in truth] == ["obj"] * len(seen[k].points)
+    assert [seen[k].action_index for k in range(4)] == [0, 1, 2, 3]
+    assert [len(seen[k].points) for k in range(4)] == [0, 1, 0, 1]
+    # The point is the one of the action's last contact step (t just under k + 1).
+    np.testing.assert_allclose(seen[1].points[0], [1.0, 2.0 - H, 0.0], atol=1e-9)
+    np.testing.assert_allclose(seen[3].dx, [[0.03, 0.0, 0.0]])
+    # x_t is the gripper pose when the action completed: just after t = k + 1.
+    x_t = assembler.GetOutputPort("ee_pose").Eval(context).translation()
+    assert 4.0 <= x_t[0] <= 4.0 + 2 * H
+
+
+@pytest.fixture(scope="module")
+def short_fb():
+    """FB's first actions through the STUCCO BOR Diagram; a context cloned after half of them."""
+    from stucco_drake.bor import build_bor_diagram
+    from stucco_drake.bor_episode import make_bor_simulator, run_episode
+
+    bor = build_bor_diagram("FB", "stucco", seed=0)
+    simulator = make_bor_simulator(bor)
+    snapshot = {}
+
+    def clone_midway(k, contacts):
+        if k == 0:
+            context = simulator.get_context()
+            snapshot["free"] = (
+                bor.detector.GetOutputPort("completed_action").Eval(
+                    bor.detector.GetMyContextFromRoot(context)),
+                bor.estimator.GetOutputPort("ee_wrench").Eval(
+                    bor.estimator.GetMyContextFromRoot(context)).copy(),
+            )  # fmt: skip
+        if k == N_SHORT // 2 - 1:
+            snapshot["context"] = simulator.get_context().Clone()
+
+    result = run_episode("FB", n_actions=N_SHORT, bor=bor, simulator=simulator,
+                         on_action=clone_midway)  # fmt: skip
+    return bor, simulator, snapshot, result
+
+
+def test_short_fb_tracks_contacts_and_scores(short_fb):
+    _, _, _, result = short_fb
+    print("\n" + result.summary())
+    print("contacts per action", result.contacts_per_action.tolist(),
+          "isolation errors (cm)", np.round(result.isolation_errors * 100, 2).tolist())
+    assert result.n_actions == N_SHORT
+    # The first actions move the gripper towards the cracker box and then along it.
+    assert len(result.map_points) >= 3
+    assert result.map_points.shape == (result.contacts_per_action.sum(), 3)
+    assert np.isfinite(result.ce_cm) and result.ce_cm < 5.0
+    assert 0.0 <= result.fmi <= 1.0
+    assert "target" in set(result.truth_labels)
+    assert result.grasp is None and result.grasp_success is None
+
+
+def test_cloned_context_reruns_to_identical_map_points(short_fb):
+    bor, simulator, snapshot, result = short_fb
+    from stucco_drake.bor_episode import action_stop_time, make_bor_simulator
+
+    rerun = make_bor_simulator(bor, snapshot["context"])
+    for k in range(N_SHORT // 2, N_SHORT):  # the same stops as the first run (see the function)
+        rerun.AdvanceTo(action_stop_time(bor.scene.scene, k))
+    assert rerun.get_context().get_time() == simulator.get_context().get_time()
+    points = bor.diagram.GetOutputPort("map_points").Eval(rerun.get_context())
+    np.testing.assert_array_equal(points, result.map_points)
+
+
+def test_free_motion_raises_no_wrench(short_fb):
+    """The first action moves in free space: the observer sees no wrench, no step is flagged."""
+    _, _, snapshot, result = short_fb
+    completed, wrench = snapshot["free"]
+    assert completed.action_index == 0 and completed.n_contact_steps == 0
+    assert np.abs(wrench).max() < 0.05  # N and N m: the arm is accelerating, not touching
+    assert result.contacts_per_action[0] == 0
+
+
+def test_committed_diagram_source_matches_the_code():
+    from stucco_drake.bor_cli import bor_graphviz
+
+    committed = (DIAGRAMS / "bor.dot").read_text()
+    assert bor_graphviz("FB") == committed, (
+        "the BOR Diagram's wiring changed: regenerate with `stucco-drake diagram --scene FB "
+        "--out diagrams/bor.svg` and commit diagrams/bor.dot (and the .svg)"
+    )
