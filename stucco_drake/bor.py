@@ -31,8 +31,9 @@ from pydrake.systems.primitives import MatrixGain
 from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.grasp import build_grasp_scene
 from stucco_drake.gripper_sdf import gripper_penetration
-from stucco_drake.scenes import BuiltScene, SceneFile, build_scene, load_scene
+from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.action_contacts_assembler import ActionContactsAssembler, TruthContact
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
@@ -42,6 +43,7 @@ from stucco_drake.systems.contact_detector import (
     default_threshold,
 )
 from stucco_drake.systems.contact_isolator import ContactIsolator, GripperPoseFromState
+from stucco_drake.systems.contact_tracking_visualizer import ContactTrackingVisualizer
 from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
 from stucco_drake.systems.target_pose_estimator import TargetPoseEstimator
 from stucco_drake.systems.wrench_estimator import N_ARM, ExternalWrenchEstimator
@@ -266,7 +268,9 @@ def build_bor_diagram(
         estimator_gain: the momentum observer's bandwidth K_O (1/s).
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
-    built = build_scene(scene, meshcat=meshcat)
+    # The grasp executor sits in the scene from the start (transparent until a grasp starts),
+    # so the grasp continues this very simulation and shows in its recording.
+    built = build_grasp_scene(scene, meshcat=meshcat, external_actions=False)
     h = float(scene.plant.time_step)
     fingers = np.full(2, scene.gripper_start.finger_position)
     X_WB = robot_base_pose(scene)
@@ -343,6 +347,14 @@ def build_bor_diagram(
     builder.Connect(assembler.GetOutputPort("ee_pose"), target.GetInputPort("ee_pose"))
     for name in ("map_points", "segment_labels", "tracked_action"):
         builder.Connect(tracking.GetOutputPort(name), target.GetInputPort(name))
+
+    if meshcat is not None:
+        drawing = builder.AddNamedSystem(
+            "contact_tracking_visualizer", ContactTrackingVisualizer(meshcat, shape, 0.05)
+        )
+        for system, name in ((tracking, "map_points"), (tracking, "segment_labels"),
+                             (assembler, "action_contacts"), (target, "target_pose")):  # fmt: skip
+            builder.Connect(system.GetOutputPort(name), drawing.GetInputPort(name))
 
     for system, name in ((tracking, "map_points"), (tracking, "segment_labels"),
                          (target, "target_pose"), (target, "estimate"),
