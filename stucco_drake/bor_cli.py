@@ -59,30 +59,19 @@ def _grasp_hook(enabled: bool):
 def run_bor(args: argparse.Namespace) -> int:
     from stucco_drake.bor_episode import run_episode
     from stucco_drake.scenes import SceneFileError, load_scene
+    from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 
     try:
         scene = load_scene(args.scene)
     except SceneFileError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    meshcat = None
-    if args.meshcat or args.record:
-        from pydrake.geometry import Meshcat, MeshcatParams
-
-        # Bound to this machine only; a recording alone needs no viewer.
-        meshcat = Meshcat(MeshcatParams(host="localhost"))
-        if args.meshcat:
-            print(f"meshcat: {meshcat.web_url()}", flush=True)
-        if args.record:
-            meshcat.StartRecording(set_visualizations_while_recording=bool(args.meshcat))
+    meshcat = start_meshcat(args.meshcat, args.record)
     result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
                          grasp=_grasp_hook(not args.no_grasp))  # fmt: skip
     print(result.summary())
     if args.record:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-        Path(args.record).write_text(meshcat.StaticHtml())
-        print(f"recording: {args.record}")
+        save_recording(meshcat, args.record)
     if args.plot:
         plot_episode(result, args.plot)
         print(f"plot: {args.plot}")

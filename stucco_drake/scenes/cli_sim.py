@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -23,9 +22,8 @@ def add_sim_command(commands) -> None:
 
 
 def run_sim(args: argparse.Namespace) -> int:
-    from pydrake.geometry import Meshcat, MeshcatParams
-
     from stucco_drake.scenes import SceneFileError, build_scene, load_scene
+    from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
     from stucco_drake.scenes.playback import play
 
     try:
@@ -33,15 +31,8 @@ def run_sim(args: argparse.Namespace) -> int:
     except SceneFileError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    meshcat = None
-    if args.meshcat or args.record:
-        # Bound to this machine only; a recording alone needs no viewer.
-        meshcat = Meshcat(MeshcatParams(host="localhost"))
-        if args.meshcat:
-            print(f"meshcat: {meshcat.web_url()}")
+    meshcat = start_meshcat(args.meshcat, args.record)
     built = build_scene(scene, meshcat=meshcat)
-    if args.record:
-        meshcat.StartRecording(set_visualizations_while_recording=bool(args.meshcat))
 
     def progress(rec):
         xy_error = np.linalg.norm(rec.gripper_xyz[:2] - rec.goal_xy) * 1000
@@ -56,8 +47,5 @@ def run_sim(args: argparse.Namespace) -> int:
         moved = np.linalg.norm(records[-1].objects[name][:2] - start[:2]) * 1000
         print(f"  {name}: moved {moved:.1f} mm")
     if args.record:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-        Path(args.record).write_text(meshcat.StaticHtml())
-        print(f"recording: {args.record}")
+        save_recording(meshcat, args.record)
     return 0
