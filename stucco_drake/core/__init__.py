@@ -1,6 +1,6 @@
 """The method in pure numpy/scipy: soft tracking, segmentation, signed distances, metrics.
 
-Nothing in this package imports pydrake, so it is testable in milliseconds without a simulator.
+Nothing in this package imports Drake, so it is testable in milliseconds without a simulator.
 """
 
 from stucco_drake.core.dynamics import TranslationDynamics
