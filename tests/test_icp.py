@@ -121,6 +121,124 @@ def test_variance_rule_picks_the_box_over_a_can():
     assert position < 0.005 and np.degrees(yaw) < 3.0
 
 
+def face_and_large_arc(rng, truth):
+    """4 points on one long face of the box at ``truth``, 16 on a 1.6 rad arc of a 0.102 m can.
+
+    The BC scene's failure: the target touched on one face only, a large can next to it touched
+    along a long arc. Contact height 5 cm; 1 mm noise; labels 0 (can) and 3 (box).
+    """
+    hx, hy = BOX.half_extents[:2]
+    # Spread over 70% of the face, longer than the short face (2 hx), so the yaw is determined.
+    along = np.linspace(-0.7, 0.7, 4) * hy + rng.uniform(-0.1 * hy, 0.1 * hy, 4)
+    face = np.column_stack([np.full(4, hx), along])
+    target = transform(truth[None], face)[0] + rng.normal(0, NOISE, face.shape)
+    distractor = arc_patch(rng, truth[:2] + np.array([0.0, 0.3]), 0.102, 1.6, 16)
+    labels = np.r_[np.zeros(len(distractor), int), np.full(len(target), 3)]
+    return lift(np.vstack([distractor, target])), labels
+
+
+@pytest.mark.parametrize("scenario", range(4))
+def test_shape_rule_rejects_a_large_can_arc_the_variance_rule_prefers(scenario):
+    """The paper's variance rule takes the can: a box corner wraps the arc (ICP RMS ~5 mm) in
+    fewer places than the box slides along its one touched face. A circle explains the arc to
+    the noise, so the shape test sets it aside and the box's face is chosen."""
+    rng = np.random.default_rng(100 + scenario)
+    truth = np.array([0.2, -0.1, 0.4])
+    points, labels = face_and_large_arc(rng, truth)
+    paper = estimate_target_pose(np.random.default_rng(0), points, labels, BOX, selection="paper")
+    estimate = estimate_target_pose(np.random.default_rng(0), points, labels, BOX)
+    can, box = estimate.segments
+    print(
+        f"\nshape excess: can {can.shape_excess:.1f}, box {box.shape_excess:.1f};"
+        f" variance m^2: can {can.position_variance:.1e}, box {box.position_variance:.1e}"
+    )
+    assert paper.segment == 0 and can.position_variance < box.position_variance
+    assert estimate.segment == 3
+    assert not can.consistent and can.shape_excess > 20.0
+    assert box.consistent and box.shape_excess < 3.0
+    # One face fixes the yaw (modulo the box's symmetry), not where along the face it lies.
+    _, yaw = pose_errors(estimate.pose, truth)
+    assert np.degrees(yaw) < 5.0
+
+
+@pytest.mark.parametrize("seed", [200, 202, 203, 205])
+def test_shape_rule_judges_a_noisy_arc_against_the_pooled_sensor_noise(seed):
+    """As in scene BC: the can's 32 points scatter by 5 mm about their circle, the target's 8
+    by 1 mm about its face. Judged against its own scatter the arc's evidence is weaker than
+    judged against the noise pooled over both segments, which rejects it."""
+    rng = np.random.default_rng(seed)
+    truth = np.array([0.2, -0.1, 0.4])
+    hx, hy = BOX.half_extents[:2]
+    face = np.column_stack([np.full(8, hx), np.linspace(-0.7, 0.7, 8) * hy])
+    target = transform(truth[None], face)[0] + rng.normal(0, NOISE, face.shape)
+    angle = rng.uniform(0, 2 * np.pi) + rng.uniform(0, 1.4, 32)
+    circle = 0.102 * np.column_stack([np.cos(angle), np.sin(angle)])
+    arc = truth[:2] + np.array([0.0, 0.35]) + circle + rng.normal(0, 0.005, (32, 2))
+    points = lift(np.vstack([arc, target]))
+    labels = np.r_[np.zeros(32, int), np.full(8, 2)]
+    paper = estimate_target_pose(np.random.default_rng(0), points, labels, BOX, selection="paper")
+    estimate = estimate_target_pose(np.random.default_rng(0), points, labels, BOX)
+    alone = estimate_target_pose(np.random.default_rng(0), points[:32], labels[:32], BOX)
+    assert paper.segment == 0 and estimate.segment == 2
+    can, box = estimate.segments
+    assert not can.consistent and box.consistent
+    assert can.shape_excess > 1.5 * alone.segments[0].shape_excess
+
+
+#: Scene BC, seed 0, final tracked points (m, world): label 1 an L-shaped patch on the tomato
+#: can, label 2 the target cracker box's face (true pose (0.259, 0.052, 1.492)).
+BC_TOMATO_AND_TARGET = np.array(
+    [
+        [0.1638, 0.1902, 0.1088], [0.1781, 0.1789, 0.1158], [0.1636, 0.1907, 0.1088],
+        [0.1617, 0.1924, 0.1137], [0.1616, 0.1907, 0.1087], [0.1616, 0.1866, 0.1087],
+        [0.1602, 0.2004, 0.1326], [0.1621, 0.2180, 0.1361], [0.1638, 0.1902, 0.1088],
+        [0.1782, 0.1756, 0.1158], [0.1677, 0.2139, 0.1396], [0.2568, 0.0138, 0.1486],
+        [0.2568, 0.0138, 0.1486], [0.2567, 0.0143, 0.1487], [0.2608, 0.0198, 0.1888],
+        [0.2357, 0.0214, 0.1728], [0.2376, 0.0218, 0.1920], [0.2109, 0.0239, 0.1842],
+        [0.2117, 0.0235, 0.1835],
+    ]
+)  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", [2, 4, 5, 6])
+def test_shape_evidence_breaks_a_variance_tie_on_real_points(seed):
+    """A box fits the tomato can's patch no better than a circle does (excess ~0) but the
+    target's points clearly better (excess ~-6): with near-equal spreads the paper's rule
+    takes the can for these seeds, the log-score combination the target."""
+    labels = np.r_[np.ones(11, int), np.full(8, 2)]
+    box = BoxSdf((0.0329, 0.079, 0.1037))
+    paper = estimate_target_pose(
+        np.random.default_rng(seed), BC_TOMATO_AND_TARGET, labels, box, selection="paper"
+    )
+    estimate = estimate_target_pose(np.random.default_rng(seed), BC_TOMATO_AND_TARGET, labels, box)
+    can, target = estimate.segments
+    assert paper.segment == 1 and estimate.segment == 2
+    assert can.consistent and target.consistent
+    assert target.shape_excess < can.shape_excess - 4.0
+    assert can.position_variance < 1.3 * target.position_variance
+
+
+def test_shape_rule_keeps_a_genuine_target_and_falls_back_when_all_fail():
+    """A box corner fits better than any circle (negative excess); with only can arcs, every
+    segment fails the test and the variance rule decides among them all, as the paper's."""
+    rng = np.random.default_rng(41)
+    points = lift(box_corner_patch(rng, [0.1, 0.2, -0.3]))
+    estimate = estimate_target_pose(
+        np.random.default_rng(0), points, np.zeros(len(points), int), BOX
+    )
+    assert estimate.segments[0].consistent and estimate.segments[0].shape_excess < 0.0
+    arcs = np.vstack(
+        [arc_patch(rng, [0.0, 0.0], 0.102, 1.6, 16), arc_patch(rng, [0.4, 0.0], 0.102, 1.6, 16)]
+    )
+    labels = np.repeat([0, 1], 16)
+    shape = estimate_target_pose(np.random.default_rng(0), lift(arcs), labels, BOX)
+    paper = estimate_target_pose(
+        np.random.default_rng(0), lift(arcs), labels, BOX, selection="paper"
+    )
+    assert not any(report.consistent for report in shape.segments)
+    assert shape.segment == paper.segment and np.array_equal(shape.pose, paper.pose)
+
+
 def test_penetration_picks_the_side_the_robot_was_not_on(disc_penetration):
     """One long side touched from outside: the box fits on either side of the points.
 
@@ -169,6 +287,10 @@ def test_bad_input_names_the_argument():
         estimate_target_pose(rng, points, labels[:-1], BOX)
     with pytest.raises(ValueError, match=r"^shape: expected"):
         estimate_target_pose(rng, points, labels, "box")
+    with pytest.raises(ValueError, match=r"^selection: expected"):
+        estimate_target_pose(rng, points, labels, BOX, selection="rms")
+    with pytest.raises(ValueError, match=r"^contact_noise: must be"):
+        estimate_target_pose(rng, points, labels, BOX, contact_noise=0.0)
     with pytest.raises(ValueError, match=r"^config_positions: expected shape"):
         estimate_target_pose(rng, points, labels, BOX, None, np.zeros((4, 2)))
     with pytest.raises(ValueError, match=r"^points_xy: no contact points"):

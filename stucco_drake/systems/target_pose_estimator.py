@@ -33,7 +33,8 @@ class TargetPoseEstimator(LeafSystem):
     the action made contact and some segment has enough points, ICP re-runs on the tracker's
     MAP points (30 seeded restarts, warm-started from the previous estimate as the authors do)
     and the paper's selection rule picks the pose (see
-    :func:`~stucco_drake.core.target_pose.estimate_target_pose`).
+    :func:`~stucco_drake.core.target_pose.estimate_target_pose`; by default segments the target's
+    outline fits much worse than a circle or line are set aside first).
 
     Input ports:
         ee_pose: RigidTransform X_WE (m, world).
