@@ -58,14 +58,10 @@ def _grasp_hook(enabled: bool):
 
 def run_bor(args: argparse.Namespace) -> int:
     from stucco_drake.bor_episode import run_episode
-    from stucco_drake.scenes import SceneFileError, load_scene
+    from stucco_drake.scenes import load_scene
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 
-    try:
-        scene = load_scene(args.scene)
-    except SceneFileError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    scene = load_scene(args.scene)  # a bad scene file is reported by the CLI's main
     meshcat = start_meshcat(args.meshcat, args.record)
     result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
                          grasp=_grasp_hook(not args.no_grasp))  # fmt: skip

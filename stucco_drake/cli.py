@@ -10,6 +10,7 @@ import numpy as np
 
 from stucco_drake.bor_cli import add_diagram_command, add_run_command
 from stucco_drake.eval.cli_table import add_table_command
+from stucco_drake.scenes import SceneFileError
 from stucco_drake.scenes.cli_sim import add_sim_command
 
 
@@ -67,7 +68,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return args.run(args)
+    try:
+        return args.run(args)
+    except SceneFileError as error:  # one line naming the file and key, no traceback
+        print(f"error: {error}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -230,3 +230,12 @@ def test_scene_names_resolve_to_diagrams_and_missing_files_fail():
     assert load_scene(DIAGRAMS_DIR / "TC.yaml").name == "TC"
     with pytest.raises(SceneFileError, match=r"nope\.yaml"):
         load_scene("nope")
+
+
+@pytest.mark.parametrize("command", ["sim", "run"])
+def test_cli_reports_a_bad_scene_in_one_line(command, capsys):
+    from stucco_drake.cli import main
+
+    assert main([command, "--scene", "no_such_scene"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "no_such_scene.yaml" in error and "\n" not in error

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 import numpy as np
 
@@ -22,15 +21,11 @@ def add_sim_command(commands) -> None:
 
 
 def run_sim(args: argparse.Namespace) -> int:
-    from stucco_drake.scenes import SceneFileError, build_scene, load_scene
+    from stucco_drake.scenes import build_scene, load_scene
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
     from stucco_drake.scenes.playback import play
 
-    try:
-        scene = load_scene(args.scene)
-    except SceneFileError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    scene = load_scene(args.scene)  # a bad scene file is reported by the CLI's main
     meshcat = start_meshcat(args.meshcat, args.record)
     built = build_scene(scene, meshcat=meshcat)
 
