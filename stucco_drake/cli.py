@@ -9,7 +9,9 @@ import time
 import numpy as np
 
 from stucco_drake.bor_cli import add_diagram_command, add_run_command
+from stucco_drake.bor_log import BOR_SOURCES
 from stucco_drake.eval.cli_table import add_table_command
+from stucco_drake.eval.sources import SYNTHETIC_SOURCES
 from stucco_drake.scenes import SceneFileError
 from stucco_drake.scenes.cli_sim import add_sim_command
 
@@ -60,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0, help="seed of the tracker's generator")
     demo.set_defaults(run=_demo)
     add_sim_command(commands)
-    add_table_command(commands)
+    add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES})
     add_run_command(commands)
     add_diagram_command(commands)
     return parser

@@ -88,11 +88,11 @@ def test_wrong_version_and_malformed_logs_give_one_line_errors(syn2_log, tmp_pat
     syn2_log.save(good)
     with np.load(good) as data:
         arrays = dict(data)
-    np.savez(tmp_path / "v2.npz", **{**arrays, "format_version": np.int64(2)})
+    np.savez(tmp_path / "v9.npz", **{**arrays, "format_version": np.int64(9)})
     del arrays["contact_dx"]
     np.savez(tmp_path / "missing.npz", **arrays)
     (tmp_path / "junk.npz").write_bytes(b"not a zip file")
-    cases = {"v2.npz": "format version 2", "missing.npz": "not a valid episode log",
+    cases = {"v9.npz": "format version 9", "missing.npz": "not a valid episode log",
              "junk.npz": "not a valid episode log", "absent.npz": "not a valid episode log"}
     for name, message in cases.items():
         with pytest.raises(ValueError, match=message) as error:

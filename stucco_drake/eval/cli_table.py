@@ -1,6 +1,7 @@
 """The ``stucco-drake table`` subcommand: Table II and its FMI/CE figure, resumably.
 
-Each episode (scene, seed) is simulated once into ``OUT/logs/<scene>_<seed>.npz`` and
+Each episode (scene, seed) is simulated once by its scene's
+:class:`~stucco_drake.eval.sources.EpisodeSource` into ``OUT/logs/<scene>_<seed>.npz`` and
 replayed by every method; every finished run is appended to ``OUT/runs.csv``; ``OUT/table.md``
 and ``OUT/fmi_ce.png`` are written from all recorded runs of the requested table. Rerunning
 the same command skips what is done.
@@ -12,7 +13,7 @@ import argparse
 import concurrent.futures as cf
 import functools
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from stucco_drake.core.baselines import TRACKER_NAMES
@@ -20,24 +21,21 @@ from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.replay import replay
 from stucco_drake.eval.results import RunResults, row_key
 from stucco_drake.eval.runner import Progress, RunInterrupted, make_executor, run_table
-from stucco_drake.eval.synthetic_episode import synthetic_episode
+from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
 from stucco_drake.eval.table import plot_fmi_ce, write_table
 
-#: Scene name -> producer(scene, seed) -> EpisodeLog. The Drake scenes plug in here.
-SCENE_PRODUCERS: dict[str, Callable[[str, int], EpisodeLog]] = {
-    "SYN2": synthetic_episode,
-    "SYNC": synthetic_episode,
-}
+Sources = Mapping[str, EpisodeSource]
 
 
-def check_names(scenes: Sequence[str], methods: Sequence[str]) -> None:
-    """ValueError naming every unknown scene and method."""
+def check_names(scenes: Sequence[str], methods: Sequence[str],
+                sources: Sources = SYNTHETIC_SOURCES) -> None:
+    """ValueError naming every unknown scene (not in ``sources``) and method."""
     problems = []
-    bad_scenes = [s for s in scenes if s not in SCENE_PRODUCERS]
+    bad_scenes = [s for s in scenes if s not in sources]
     bad_methods = [m for m in methods if m not in TRACKER_NAMES]
     if bad_scenes:
         problems.append(f"unknown scene(s) {', '.join(map(repr, bad_scenes))} "
-                        f"(known: {', '.join(SCENE_PRODUCERS)})")
+                        f"(known: {', '.join(sources)})")
     if bad_methods:
         problems.append(f"unknown method(s) {', '.join(map(repr, bad_methods))} "
                         f"(known: {', '.join(TRACKER_NAMES)})")
@@ -49,30 +47,36 @@ def episode_path(out: Path, scene: str, seed: int) -> Path:
     return Path(out) / "logs" / f"{scene}_{seed}.npz"
 
 
-def produce_episode(episode: tuple[str, int], out: str) -> str:
+def produce_episode(episode: tuple[str, int], out: str, source: EpisodeSource) -> str:
     """Simulate one episode and save its log (runs in a worker); returns its path."""
     scene, seed = episode
     path = episode_path(Path(out), scene, seed)
-    SCENE_PRODUCERS[scene](scene, seed).save(path)
+    source.produce(scene, seed).save(path)
     return str(path)
 
 
-def replay_cached(task: tuple[str, int, str], out: str) -> dict:
-    """One run (scene, seed, method) replayed from its cached log (runs in a worker)."""
+def replay_cached(task: tuple[str, int, str], out: str, sources: Sources) -> dict:
+    """One run (scene, seed, method) replayed from its cached log, with the scene source's
+    pxpen and grasp (runs in a worker)."""
     scene, seed, method = task
     log = EpisodeLog.load(episode_path(Path(out), scene, seed))
     if (log.scene, log.seed) != (scene, seed):
         raise ValueError(f"log of {scene}_{seed} holds episode {log.scene}_{log.seed}")
-    return replay(log, method)
+    source = sources[scene]
+    penetration = None
+    if method == "stucco" and source.penetration is not None:
+        penetration = source.penetration(log)
+    return replay(log, method, penetration=penetration, grasp=source.grasp)
 
 
-def _simulate_missing(episodes, out: Path, executor: cf.Executor, progress) -> None:
+def _simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
+                      sources: Sources) -> None:
     """Simulate the episodes whose logs are not cached yet, in parallel."""
     missing = [e for e in episodes if not episode_path(out, *e).exists()]
     if not missing:
         return
     bar = Progress(len(missing), "episodes", stream=progress)
-    futures = {executor.submit(produce_episode, e, str(out)): e for e in missing}
+    futures = {executor.submit(produce_episode, e, str(out), sources[e[0]]): e for e in missing}
     errors = []
     try:
         for future in cf.as_completed(futures):
@@ -99,20 +103,23 @@ def make_table(
     out,
     executor: cf.Executor,
     progress=None,
+    sources: Sources = SYNTHETIC_SOURCES,
 ) -> list[dict]:
     """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
 
-    Returns the table's rows (from ``OUT/runs.csv``, including runs of earlier calls).
+    ``sources`` maps each scene name to its :class:`EpisodeSource`. Returns the table's rows
+    (from ``OUT/runs.csv``, including runs of earlier calls).
     """
-    check_names(scenes, methods)
+    check_names(scenes, methods, sources)
     if runs < 1:
         raise ValueError(f"runs must be positive, got {runs}")
     out = Path(out)
     episodes = [(scene, seed) for scene in scenes for seed in range(runs)]
-    _simulate_missing(episodes, out, executor, progress)
+    _simulate_missing(episodes, out, executor, progress, sources)
     tasks = [(scene, seed, method) for scene, seed in episodes for method in methods]
     results = RunResults(out / "runs.csv")
-    run_table(tasks, functools.partial(replay_cached, out=str(out)), results, executor, progress)
+    replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources))
+    run_table(tasks, replay_task, results, executor, progress)
     wanted = set(tasks)
     rows = [row for row in results.rows() if row_key(row) in wanted]
     write_table(rows, scenes, methods, out / "table.md")
@@ -120,14 +127,14 @@ def make_table(
     return rows
 
 
-def add_table_command(subparsers) -> None:
-    """Adds ``table`` to the CLI's subparsers."""
+def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES) -> None:
+    """Adds ``table`` to the CLI's subparsers, over the scenes of ``sources``."""
     table = subparsers.add_parser(
         "table", help="replay every method on logged episodes; write Table II and Fig. 5"
     )
     table.add_argument("--runs", type=int, default=20, help="seeds 0..RUNS-1 per scene")
     table.add_argument("--scenes", nargs="+", required=True,
-                       help=f"scene names ({', '.join(SCENE_PRODUCERS)})")
+                       help=f"scene names ({', '.join(sources)})")
     table.add_argument("--methods", nargs="+", default=list(TRACKER_NAMES),
                        help=f"tracking methods (default: {' '.join(TRACKER_NAMES)})")
     table.add_argument("--out", required=True, help="output folder (logs, runs.csv, table)")
@@ -137,13 +144,13 @@ def add_table_command(subparsers) -> None:
                        help="local process pool, or a Dask cluster")
     table.add_argument("--scheduler", default=None,
                        help="Dask scheduler address (default: start a local cluster)")
-    table.set_defaults(run=run_table_command)
+    table.set_defaults(run=functools.partial(run_table_command, sources=sources))
 
 
-def run_table_command(args: argparse.Namespace) -> int:
+def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOURCES) -> int:
     """Handler of ``stucco-drake table``: 0 done, 1 interrupted (rerun resumes), 2 bad input."""
     try:
-        check_names(args.scenes, args.methods)
+        check_names(args.scenes, args.methods, sources)
         if args.scheduler is not None and args.executor != "dask":
             raise ValueError("--scheduler needs --executor dask")
         executor = make_executor(args.executor, args.workers, args.scheduler)
@@ -152,7 +159,8 @@ def run_table_command(args: argparse.Namespace) -> int:
         return 2
     try:
         with executor:
-            rows = make_table(args.scenes, args.methods, args.runs, args.out, executor)
+            rows = make_table(args.scenes, args.methods, args.runs, args.out, executor,
+                              sources=sources)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1

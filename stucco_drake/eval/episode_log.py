@@ -1,6 +1,6 @@
 """A versioned ``.npz`` log of one episode (scene, seed), replayed by every tracking method.
 
-Layout (format version 1; T actions, N contacts, k objects; metres, radians, world frame):
+Layout (format version 2; T actions, N contacts, k objects; metres, radians, world frame):
 
 - ``ee_position`` (T, 3) and ``ee_rotation`` (T, 3, 3): the EE pose after each action.
 - ``contact_points``, ``contact_dx`` (N, 3): every action's detected contacts, flat; those of
@@ -10,11 +10,12 @@ Layout (format version 1; T actions, N contacts, k objects; metres, radians, wor
   row 0 before the first action, row t + 1 after action t. Planar, because the tasks are
   planar and the paper scores CE on objects extruded in z; the Drake producer projects its
   7-vector poses to (x, y, yaw about z).
-- ``object_shapes`` (k, 6): one primitive per object in its pose frame, see :func:`box_spec`
-  and :func:`cylinder_spec`; ``object_names`` (k,).
+- ``object_shapes`` (m, 7): the objects' primitives, each in its object's pose frame (see
+  :func:`box_spec` and :func:`cylinder_spec`), and ``shape_object`` (m,) the object each
+  belongs to (an object may be made of several); ``object_names`` (k,).
 - ``robot_object_distance`` (T, k): distance from the robot to each object after each action
   (m, 0 in contact), or (0, k) when the producer did not log it.
-- ``robot_shape`` (6,) the EE as a primitive (for pxpen), or (0,) when the replayer must be
+- ``robot_shape`` (7,) the EE as a primitive (for pxpen), or (0,) when the replayer must be
   given the robot's penetration.
 - ``final_state``: opaque float array (e.g. the final plant state), for the grasp attempt.
 - metadata: ``scene``, ``seed``, ``action_noise`` (m, half-width of the uniform noise added
@@ -33,20 +34,21 @@ import numpy as np
 from stucco_drake.core.npz import save_npz_atomically
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 SHAPE_BOX, SHAPE_CYLINDER = 0, 1
 #: Half height (m) of the objects when scoring CE: extruded, as in the paper, so only xy counts.
 _EXTRUDED_HALF_HEIGHT = 1.0
 
 
-def box_spec(half_x, half_y, half_z, offset=(0.0, 0.0)) -> np.ndarray:
-    """Shape row of a box with half extents (m), centred at ``offset`` (m) in the pose frame."""
-    return np.array([SHAPE_BOX, half_x, half_y, half_z, *offset], dtype=np.float64)
+def box_spec(half_x, half_y, half_z, offset=(0.0, 0.0), yaw: float = 0.0) -> np.ndarray:
+    """Shape row of a box with half extents (m), centred at ``offset`` (m) in the pose frame
+    and turned by ``yaw`` (rad) about z relative to it."""
+    return np.array([SHAPE_BOX, half_x, half_y, half_z, *offset, yaw], dtype=np.float64)
 
 
 def cylinder_spec(radius, half_height, offset=(0.0, 0.0)) -> np.ndarray:
     """Shape row of a vertical cylinder (m), its axis at ``offset`` (m) in the pose frame."""
-    return np.array([SHAPE_CYLINDER, radius, 0.0, half_height, *offset], dtype=np.float64)
+    return np.array([SHAPE_CYLINDER, radius, 0.0, half_height, *offset, 0.0], dtype=np.float64)
 
 
 def shape_sdf(spec, extruded: bool = False):
@@ -72,11 +74,11 @@ class PlanarSurface:
         x, y, yaw = self.pose
         c, s = np.cos(yaw), np.sin(yaw)
         dx, dy = points[..., 0] - x, points[..., 1] - y
-        # World -> object frame (R(yaw)^T), then -> shape frame (minus its offset); z = 0
-        # because the shape is extruded.
-        local = np.stack(
-            [c * dx + s * dy - self.spec[4], -s * dx + c * dy - self.spec[5], 0.0 * dx], axis=-1
-        )
+        # World -> object frame (R(yaw)^T), then -> shape frame (minus its offset, turned
+        # back by its yaw); z = 0 because the shape is extruded.
+        ox, oy = c * dx + s * dy - self.spec[4], -s * dx + c * dy - self.spec[5]
+        cs, ss = np.cos(self.spec[6]), np.sin(self.spec[6])
+        local = np.stack([cs * ox + ss * oy, -ss * ox + cs * oy, 0.0 * dx], axis=-1)
         return shape_sdf(self.spec, extruded=True)(local)
 
 
@@ -89,6 +91,7 @@ _ARRAYS = {  # array field -> dtype; shapes are checked in EpisodeLog.validate()
     "contact_object": np.int64,
     "object_poses": np.float64,
     "object_shapes": np.float64,
+    "shape_object": np.int64,
     "robot_object_distance": np.float64,
     "robot_shape": np.float64,
     "final_state": np.float64,
@@ -114,9 +117,12 @@ class EpisodeLog:
     robot_object_distance: np.ndarray
     robot_shape: np.ndarray
     final_state: np.ndarray
+    shape_object: np.ndarray | None = None  # default: one shape per object, in order
     info: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
+        if self.shape_object is None:
+            self.shape_object = np.arange(len(self.object_shapes))
         for name, dtype in _ARRAYS.items():
             setattr(self, name, np.asarray(getattr(self, name), dtype=dtype))
         self.object_names = [str(n) for n in self.object_names]
@@ -137,9 +143,10 @@ class EpisodeLog:
 
     def final_surfaces(self) -> list[PlanarSurface]:
         """Signed distances of every object at its final pose, extruded in z (CE's surfaces)."""
+        poses = self.object_poses[-1]
         return [
-            PlanarSurface(tuple(spec), tuple(pose))
-            for spec, pose in zip(self.object_shapes, self.object_poses[-1], strict=True)
+            PlanarSurface(tuple(spec), tuple(poses[k]))
+            for spec, k in zip(self.object_shapes, self.shape_object, strict=True)
         ]
 
     def validate(self) -> None:
@@ -153,7 +160,8 @@ class EpisodeLog:
             "contact_dx": (n, 3),
             "contact_object": (n,),
             "object_poses": (t + 1, k, 3),
-            "object_shapes": (k, 6),
+            "object_shapes": (len(self.shape_object), 7),
+            "shape_object": (len(self.object_shapes),),
         }
         for name, shape in expected.items():
             if getattr(self, name).shape != shape:
@@ -166,10 +174,12 @@ class EpisodeLog:
                 f"robot_object_distance: expected shape ({t}, {k}) or (0, {k}), "
                 f"got {self.robot_object_distance.shape}"
             )
-        if self.robot_shape.shape not in ((6,), (0,)):
+        if self.robot_shape.shape not in ((7,), (0,)):
             raise ValueError(
-                f"robot_shape: expected shape (6,) or (0,), got {self.robot_shape.shape}"
+                f"robot_shape: expected shape (7,) or (0,), got {self.robot_shape.shape}"
             )
+        if np.any((self.shape_object < 0) | (self.shape_object >= k)):
+            raise ValueError(f"shape_object: indices must lie in [0, {k})")
         if np.any((self.contact_object < -1) | (self.contact_object >= k)):
             raise ValueError(f"contact_object: indices must lie in [-1, {k})")
 

@@ -1,0 +1,247 @@
+"""Episode logs of the Drake BOR scenes: simulate each (scene, seed) once, replay every method.
+
+:func:`record_episode` plays a scene's actions, each perturbed by uniform noise of up to
+``action_noise`` (0.5 mm) per axis drawn from the run's seed, through the BOR Diagram
+(:func:`~stucco_drake.bor.build_bor_diagram`) and writes what every tracking method needs into
+an :class:`~stucco_drake.eval.episode_log.EpisodeLog`: per action the gripper pose, the
+detected contact points with their dx, which object each truly touched, the planar pose of
+every object and the gripper's distance to each; at the end the plant's state. Replaying a
+log (:func:`stucco_drake.eval.replay.replay`) needs the gripper's pxpen
+(:func:`log_penetration`) and grasps from the logged final state (:func:`grasp_from_log`).
+
+Units: m, rad, s; poses in the world frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+
+from stucco_drake.bor import build_bor_diagram, collision_shapes, object_surfaces, target_shape
+from stucco_drake.bor_episode import make_bor_simulator, run_episode
+from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.core.target_pose import estimate_target_pose
+from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
+from stucco_drake.eval.sources import EpisodeSource
+from stucco_drake.grasp import build_grasp_scene, execute_grasp
+from stucco_drake.gripper_sdf import gripper_penetration
+from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
+from stucco_drake.scenes.builder import yaw_of
+from stucco_drake.systems.contact_isolator import sample_gripper_surface
+
+#: Half-width (m) of the uniform noise added to every action axis (paper Sec. V).
+ACTION_NOISE = 5e-4
+#: Spacing (m) of the gripper surface samples for the robot-object distance (ambiguity).
+_DISTANCE_SPACING = 0.006
+
+
+def perturbed_scene(scene: SceneFile, seed: int, action_noise: float = ACTION_NOISE) -> SceneFile:
+    """``scene`` with every action axis moved by U(-action_noise, action_noise) m, drawn from
+    ``numpy.random.default_rng(seed)`` (the scene's actions are in units of ``max_step``)."""
+    rng = np.random.default_rng(seed)
+    actions = np.asarray(scene.actions, dtype=np.float64).reshape(-1, 2)
+    noise = rng.uniform(-action_noise, action_noise, actions.shape) / scene.control.max_step
+    return dataclasses.replace(scene, actions=(actions + noise).tolist())
+
+
+# --------------------------------------------------------------------------- planar geometry
+def _planar_spec(sdf, X_BG) -> np.ndarray:
+    """The shape row (see ``box_spec``) of a collision shape at X_BG in its body frame: an
+    upright box or cylinder keeps its kind; a lying cylinder becomes its box footprint."""
+    R = X_BG.rotation().matrix()
+    offset = X_BG.translation()[:2]
+    if isinstance(sdf, CylinderSdf):
+        axis = R[:, 2]
+        if abs(abs(axis[2]) - 1.0) < 1e-6:
+            return cylinder_spec(sdf.radius, sdf.half_height, offset)
+        if abs(axis[2]) < 1e-6:
+            yaw = math.atan2(axis[1], axis[0])
+            return box_spec(sdf.half_height, sdf.radius, sdf.radius, offset, yaw)
+    elif isinstance(sdf, BoxSdf):
+        half = np.asarray(sdf.half_extents, dtype=np.float64)
+        up = int(np.argmax(np.abs(R[2])))  # the box axis along the body's z
+        if abs(abs(R[2, up]) - 1.0) < 1e-6:
+            a, b = [i for i in range(3) if i != up]
+            yaw = math.atan2(R[1, a], R[0, a])
+            return box_spec(half[a], half[b], half[up], offset, yaw)
+    raise ValueError(f"cannot log a {type(sdf).__name__} tilted in its body frame as planar")
+
+
+def planar_objects(built: BuiltScene, plant_context) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """(names, shape rows (m, 7), shape_object (m,)) of every object on the table (free and
+    welded, not the table), in the order of :func:`~stucco_drake.bor.object_surfaces`."""
+    names = list(object_surfaces(built, plant_context))
+    bodies = {**built.free_bodies, **built.welded_bodies}
+    specs, owner = [], []
+    for k, name in enumerate(names):
+        for sdf, X_BG in collision_shapes(built.plant, built.scene_graph, bodies[name]):
+            specs.append(_planar_spec(sdf, X_BG))
+            owner.append(k)
+    return names, np.array(specs).reshape(-1, 7), np.array(owner, dtype=np.int64)
+
+
+def planar_poses(built: BuiltScene, plant_context, names) -> np.ndarray:
+    """(k, 3) planar poses (x, y, yaw about z) of the named objects' bodies (m, rad)."""
+    bodies = {**built.free_bodies, **built.welded_bodies}
+    poses = []
+    for name in names:
+        X = bodies[name].EvalPoseInWorld(plant_context)
+        poses.append([*X.translation()[:2], yaw_of(X.rotation())])
+    return np.array(poses).reshape(-1, 3)
+
+
+class GripperObjectDistance:
+    """Distance (m, 0 in contact) from the gripper to each object, for the paper's ambiguity.
+
+    The gripper's collision surface is sampled once (``_DISTANCE_SPACING`` apart, fingers at
+    ``opening``); each object's distance is the least signed distance of a sample to its
+    exact box/cylinder surfaces, clipped at 0. Sampling makes it up to half a spacing long.
+    """
+
+    def __init__(self, opening: float):
+        points, _ = sample_gripper_surface(np.random.default_rng(0), _DISTANCE_SPACING, opening)
+        self._points = points
+
+    def __call__(self, built: BuiltScene, plant_context, names) -> np.ndarray:
+        X_WG = built.gripper_frame().CalcPoseInWorld(plant_context)
+        points = self._points @ X_WG.rotation().matrix().T + X_WG.translation()
+        surfaces = object_surfaces(built, plant_context)
+        return np.array([
+            max(0.0, min(float(np.min(s(points))) for s in surfaces[name])) for name in names
+        ])  # fmt: skip
+
+
+# ------------------------------------------------------------------------------- recording
+def record_episode(
+    scene: SceneFile | str,
+    seed: int,
+    *,
+    action_noise: float = ACTION_NOISE,
+    n_actions: int | None = None,
+    method: str = "stucco",
+) -> EpisodeLog:
+    """Simulates ``scene`` once with run ``seed``'s perturbed actions and logs it.
+
+    The BOR Diagram runs with ``method`` (its live tracking result goes to ``info["live"]``
+    for reference; the log's observations do not depend on it). Every random stream derives
+    from ``seed``. Returns the log; the plant's final [q; v] is its ``final_state``.
+    """
+    base = load_scene(scene) if isinstance(scene, str) else scene
+    scene = perturbed_scene(base, seed, action_noise)
+    bor = build_bor_diagram(scene, method, seed)
+    built = bor.scene
+    simulator = make_bor_simulator(bor)
+    context = simulator.get_mutable_context()
+    plant_context = built.plant.GetMyContextFromRoot(context)
+    names, specs, owner = planar_objects(built, plant_context)
+    index = {name: k for k, name in enumerate(names)}
+    distance = GripperObjectDistance(scene.gripper_start.finger_position)
+    assembler_context = bor.assembler.GetMyContextFromRoot(context)
+    poses, distances, positions, rotations = [planar_poses(built, plant_context, names)], [], [], []
+    points, dx, objects, offsets = [], [], [], [0]
+
+    def on_action(k, contacts):
+        truth = bor.diagram.GetOutputPort("action_truth").Eval(context)
+        X_WE = bor.assembler.GetOutputPort("ee_pose").Eval(assembler_context)
+        positions.append(X_WE.translation().copy())
+        rotations.append(X_WE.rotation().matrix().copy())
+        points.append(np.asarray(contacts.points, dtype=np.float64).reshape(-1, 3))
+        dx.append(np.asarray(contacts.dx, dtype=np.float64).reshape(-1, 3))
+        objects.extend(index.get(t.name, -1) for t in truth)
+        offsets.append(offsets[-1] + len(points[-1]))
+        poses.append(planar_poses(built, plant_context, names))
+        distances.append(distance(built, plant_context, names))
+
+    result = run_episode(scene, method, seed, n_actions, bor=bor, simulator=simulator,
+                         on_action=on_action)
+    return EpisodeLog(
+        scene=base.name,
+        seed=int(seed),
+        action_noise=float(action_noise),
+        ee_position=np.array(positions).reshape(-1, 3),
+        ee_rotation=np.array(rotations).reshape(-1, 3, 3),
+        contact_offsets=np.array(offsets),
+        contact_points=np.concatenate(points).reshape(-1, 3),
+        contact_dx=np.concatenate(dx).reshape(-1, 3),
+        contact_object=np.array(objects, dtype=np.int64),
+        object_names=names,
+        object_poses=np.array(poses),
+        object_shapes=specs,
+        shape_object=owner,
+        robot_object_distance=np.array(distances).reshape(-1, len(names)),
+        robot_shape=np.zeros(0),
+        final_state=built.plant.GetPositionsAndVelocities(plant_context),
+        info={
+            "producer": "drake",
+            "target": base.target,
+            "finger_position": float(scene.gripper_start.finger_position),
+            "final_time_s": float(context.get_time()),
+            "wall_time_s": float(result.wall_time_s),
+            "live": {"method": method, "ce_cm": float(result.ce_cm), "fmi": float(result.fmi)},
+        },
+    )
+
+
+# ------------------------------------------------------------------------------- replaying
+@functools.lru_cache(maxsize=4)
+def _gripper_penetration(opening: float) -> RobotPenetration:
+    return gripper_penetration(opening=opening)
+
+
+def log_penetration(log: EpisodeLog) -> RobotPenetration:
+    """The gripper's pxpen at the log's finger opening (cached per process)."""
+    return _gripper_penetration(float(log.info["finger_position"]))
+
+
+def _grasp_scene(scene_name: str):
+    return build_grasp_scene(load_scene(scene_name))
+
+
+def grasp_from_log(log: EpisodeLog, tracker):
+    """Grasp the target where the tracker's points say it is, from the logged final state.
+
+    The target's pose is estimated as the BOR Diagram does
+    (:func:`~stucco_drake.core.target_pose.estimate_target_pose` with 30 restarts, the gripper's
+    pxpen at every logged end-effector position), with a generator seeded by
+    ``[log.seed, 1]``; the grasp then runs in a freshly built grasp scene set to the logged
+    plant state (:func:`~stucco_drake.grasp.execute_grasp`). Returns the
+    :class:`~stucco_drake.grasp.GraspResult`, or None when no segment can be fitted (no grasp
+    is attempted: a failure).
+    """
+    built = _grasp_scene(log.scene)
+    shape = target_shape(built)
+    points, labels = tracker.map_points(), tracker.segment()
+    try:
+        estimate = estimate_target_pose(
+            np.random.default_rng([log.seed, 1]), points, labels, shape, log_penetration(log),
+            log.ee_position, log.ee_rotation[-1],
+        )  # fmt: skip
+    except ValueError:
+        return None
+    simulator = Simulator(built.diagram)
+    context = simulator.get_mutable_context()
+    context.SetTime(float(log.info.get("final_time_s", 0.0)))
+    built.plant.SetPositionsAndVelocities(
+        built.plant.GetMyMutableContextFromRoot(context), log.final_state
+    )
+    simulator.Initialize()
+    return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw), shape)
+
+
+def grasp_success(log: EpisodeLog, tracker) -> bool:
+    """The ``grasp`` hook of :func:`stucco_drake.eval.replay.replay` for Drake logs."""
+    result = grasp_from_log(log, tracker)
+    return bool(result is not None and result.success)
+
+
+
+#: The paper's four Blind Object Retrieval scenes, as sources of ``stucco-drake table``.
+BOR_SCENES = ("FB", "BC", "IB", "TC")
+BOR_SOURCES = {
+    name: EpisodeSource(record_episode, log_penetration, grasp_success) for name in BOR_SCENES
+}

@@ -1,0 +1,40 @@
+"""Where the episodes of a table come from: a producer per scene, and how to replay its logs.
+
+An :class:`EpisodeSource` bundles, for one family of scenes, the function that simulates an
+episode into an :class:`~stucco_drake.eval.episode_log.EpisodeLog`, the robot's pxpen for
+STUCCO when the log carries no primitive robot shape, and the grasp attempted after replay.
+Its callables are module-level functions, so a source can be sent to worker processes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.eval.episode_log import EpisodeLog
+from stucco_drake.eval.replay import GraspCheck
+from stucco_drake.eval.synthetic_episode import SYNTHETIC_SCENES, synthetic_episode
+
+
+@dataclasses.dataclass(frozen=True)
+class EpisodeSource:
+    """How to make and replay one scene's episodes.
+
+    Attributes:
+        produce: ``produce(scene, seed) -> EpisodeLog`` simulates one episode.
+        penetration: ``penetration(log) -> RobotPenetration`` for STUCCO (None: the log's
+            primitive ``robot_shape``).
+        grasp: ``grasp(log, tracker) -> bool`` run after replay (None: no grasp, the row's
+            grasp success stays empty).
+    """
+
+    produce: Callable[[str, int], EpisodeLog]
+    penetration: Callable[[EpisodeLog], RobotPenetration] | None = None
+    grasp: GraspCheck | None = None
+
+
+#: The synthetic planar scenes (no Drake): no grasp.
+SYNTHETIC_SOURCES: dict[str, EpisodeSource] = {
+    name: EpisodeSource(synthetic_episode) for name in SYNTHETIC_SCENES
+}

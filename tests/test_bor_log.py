@@ -1,0 +1,133 @@
+"""Episode logs of the Drake BOR scenes: recording, planar geometry, replay and grasping."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+
+from stucco_drake.bor_log import _planar_spec, grasp_from_log, log_penetration, record_episode
+from stucco_drake.core.baselines import TRACKER_NAMES
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.eval.episode_log import EpisodeLog, PlanarSurface
+from stucco_drake.eval.replay import replay
+
+N_ACTIONS = 8  # FB's first 8 actions: two free, then pushes into the target
+
+
+@pytest.fixture(scope="module")
+def fb_log(tmp_path_factory) -> EpisodeLog:
+    path = tmp_path_factory.mktemp("logs") / "FB_3.npz"
+    record_episode("FB", 3, n_actions=N_ACTIONS).save(path)
+    return EpisodeLog.load(path)  # through the file, as the table reads it
+
+
+def test_fb_log_holds_the_episode(fb_log):
+    assert fb_log.scene == "FB" and fb_log.seed == 3 and fb_log.n_actions == N_ACTIONS
+    assert fb_log.action_noise == pytest.approx(5e-4)
+    names = fb_log.object_names
+    assert names[0] == "target" and "robot_pedestal" in names and "table" not in names
+    # The mustard bottle is three shapes; every object owns at least one.
+    assert np.bincount(fb_log.shape_object, minlength=len(names)).min() >= 1
+    assert np.count_nonzero(fb_log.shape_object == names.index("mustard")) == 3
+    # The pushes touch the target: most contacts are labelled with it, and the gripper is
+    # within a sampling spacing (6 mm) of it after an action whose contact was on it.
+    target = names.index("target")
+    assert np.mean(fb_log.contact_object == target) >= 0.6, fb_log.contact_object
+    for t in range(N_ACTIONS):
+        if np.any(fb_log.contacts(t)[2] == target):
+            assert fb_log.robot_object_distance[t, target] <= 0.006
+    # The pushes nudge the 10 kg target (1.4 mm in 8 actions at seed 3); the walls stay put.
+    moved = np.linalg.norm(np.diff(fb_log.object_poses[[0, -1], :, :2], axis=0)[0], axis=1)
+    assert moved[target] > 5e-4
+    assert moved[names.index("back_wall")] < 1e-9
+    # Contact points lie on the touched object's surface at that time (isolation error).
+    errors = []
+    for t in range(N_ACTIONS):
+        points, _, objects = fb_log.contacts(t)
+        for p, k in zip(points, objects, strict=True):
+            if k >= 0:
+                shapes = np.flatnonzero(fb_log.shape_object == k)
+                d = min(abs(PlanarSurface(tuple(fb_log.object_shapes[s]),
+                                          tuple(fb_log.object_poses[t + 1, k]))(p[None])[0])
+                        for s in shapes)  # fmt: skip
+                errors.append(d)
+    assert len(errors) >= 3 and np.median(errors) < 0.03, errors
+    assert fb_log.final_state.size > 2 * 7 and np.all(np.isfinite(fb_log.final_state))
+
+
+def test_same_seed_same_log():
+    a = record_episode("FB", 5, n_actions=3)
+    b = record_episode("FB", 5, n_actions=3)
+    for name in ("ee_position", "contact_points", "contact_dx", "object_poses", "final_state"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_every_method_replays_a_drake_log(fb_log):
+    penetration = log_penetration(fb_log)
+    for method in TRACKER_NAMES:
+        row = replay(fb_log, method, penetration=penetration if method == "stucco" else None)
+        assert row["n_contacts"] == fb_log.n_contacts, method
+        assert 0.0 <= row["ce_cm"] < 5.0, row
+        assert 0.0 < row["fmi"] <= 1.0, row
+
+
+class _TrueOutline:
+    """A tracker stand-in whose points lie on the target's final outline (one segment)."""
+
+    def __init__(self, log: EpisodeLog, offset=(0.0, 0.0)):
+        x, y, yaw = log.object_poses[-1, 0]
+        hx, hy = log.object_shapes[0, 1:3]
+        # Two adjacent faces (an L pins the pose), in the target's frame.
+        local = [(-hx, v) for v in np.linspace(-hy, hy, 9)]
+        local += [(u, -hy) for u in np.linspace(-hx, hx, 5)[1:]]
+        c, s = math.cos(yaw), math.sin(yaw)
+        self._points = np.array([
+            (x + offset[0] + c * u - s * v, y + offset[1] + s * u + c * v, 0.1) for u, v in local
+        ])  # fmt: skip
+
+    def map_points(self):
+        return self._points
+
+    def segment(self):
+        return np.zeros(len(self._points), dtype=np.int64)
+
+
+def test_grasp_from_log_lifts_the_target_at_its_outline(fb_log):
+    result = grasp_from_log(fb_log, _TrueOutline(fb_log))
+    assert result is not None and result.success, result
+    assert result.lift_height >= 0.05
+
+
+def test_grasp_from_log_without_a_segment_is_a_failure(fb_log):
+    class Empty(_TrueOutline):
+        def segment(self):
+            return -np.ones(len(self._points), dtype=np.int64)  # all noise: nothing to fit
+
+    assert grasp_from_log(fb_log, Empty(fb_log)) is None
+
+
+def test_planar_specs_of_turned_and_lying_shapes():
+    box = _planar_spec(BoxSdf((0.1, 0.2, 0.3)), RigidTransform(RollPitchYaw(0, 0, 0.4), [1, 2, 3]))
+    np.testing.assert_allclose(box, [0, 0.1, 0.2, 0.3, 1, 2, 0.4])
+    # A box on its side: its y axis is the body's z.
+    origin = np.zeros(3)
+    side = _planar_spec(BoxSdf((0.1, 0.2, 0.3)),
+        RigidTransform(RollPitchYaw(math.pi / 2, 0, 0), origin))
+    np.testing.assert_allclose(side[1:4], [0.1, 0.3, 0.2], atol=1e-12)
+    lying = _planar_spec(CylinderSdf(0.05, 0.2),
+        RigidTransform(RollPitchYaw(0, math.pi / 2, 0), origin))
+    np.testing.assert_allclose(lying[:4], [0, 0.2, 0.05, 0.05], atol=1e-12)
+    with pytest.raises(ValueError, match="tilted"):
+        _planar_spec(BoxSdf((0.1, 0.2, 0.3)), RigidTransform(RollPitchYaw(0.3, 0, 0), origin))
+
+
+def test_planar_surface_turns_an_offset_shape():
+    # A 0.2 x 0.02 box offset 0.1 along the object's x and turned 90 degrees in it; the object
+    # itself at (1, 0) turned 90 degrees: the box ends up along world x, centred at (1, 0.1).
+    surface = PlanarSurface((0, 0.1, 0.01, 0.05, 0.1, 0.0, math.pi / 2), (1.0, 0.0, math.pi / 2))
+    np.testing.assert_allclose(surface(np.array([[1.0, 0.1, 0.0], [1.1, 0.1, 0.0],
+                                                 [1.0, 0.12, 0.0]])),
+                               [-0.01, 0.0, 0.01], atol=1e-12)  # fmt: skip
