@@ -114,7 +114,8 @@ def make_table(
     if runs < 1:
         raise ValueError(f"runs must be positive, got {runs}")
     out = Path(out)
-    episodes = [(scene, seed) for scene in scenes for seed in range(runs)]
+    # Seed-major, so that an interrupted table has as many runs of every scene.
+    episodes = [(scene, seed) for seed in range(runs) for scene in scenes]
     _simulate_missing(episodes, out, executor, progress, sources)
     tasks = [(scene, seed, method) for scene, seed in episodes for method in methods]
     results = RunResults(out / "runs.csv")
