@@ -34,6 +34,7 @@ from stucco_drake.systems.contact_detector import (
     Q_NOMINAL,
     ContactDetector,
     add_joint_controlled_robot,
+    calibrate_residual_statistics,
 )
 from stucco_drake.systems.contact_isolator import (
     SOURCE_BUBBLE,
@@ -90,13 +91,17 @@ def make_pushes(seed: int, R_WG: np.ndarray):
     return windows
 
 
-@pytest.fixture(scope="module")
-def cpf_run():
+def run_rig(variants: dict, *, estimator_kwargs=None, statistics=None):
+    """The pushes of make_pushes(21) on the rig, seen by one isolator per ``variants`` entry
+    (key -> ContactIsolator keyword arguments); returns the isolators' logs by (key, port)."""
     builder = DiagramBuilder()
     duration = GAP + N_PUSHES * (PUSH + GAP)
     q = np.r_[Q_NOMINAL, FINGERS_NOMINAL]
     hold = PiecewisePolynomial.FirstOrderHold([0.0, duration], np.c_[q, q])
-    robot = add_joint_controlled_robot(builder, hold, time_step=H)
+    kwargs = dict(estimator_kwargs or {})
+    if statistics is not None:
+        kwargs["residual_statistics"] = statistics
+    robot = add_joint_controlled_robot(builder, hold, time_step=H, estimator_kwargs=kwargs)
     plant, est = robot.plant, robot.estimator
     fk = builder.AddSystem(GripperPoseFromState(finger_positions=FINGERS_NOMINAL))
     builder.Connect(plant.get_state_output_port(plant.GetModelInstanceByName("iiwa")),
@@ -113,13 +118,14 @@ def cpf_run():
     builder.Connect(est.GetOutputPort("ee_position"), detector.GetInputPort("ee_position"))
     builder.Connect(action.get_output_port(), detector.GetInputPort("action_index"))
     logs = {}
-    for reuse in (True, False):
-        iso = builder.AddSystem(ContactIsolator(ISO_H, seed=3, reuse_particles=reuse))
+    for key, iso_kwargs in variants.items():
+        iso = builder.AddSystem(ContactIsolator(ISO_H, seed=3, **iso_kwargs))
         builder.Connect(est.GetOutputPort("ee_wrench"), iso.GetInputPort("ee_wrench"))
         builder.Connect(fk.get_output_port(), iso.GetInputPort("gripper_pose"))
         builder.Connect(detector.GetOutputPort("in_contact"), iso.GetInputPort("in_contact"))
-        for name in ("contact_point_gripper", "contact_point", "has_contact"):
-            logs[reuse, name] = LogVectorOutput(iso.GetOutputPort(name), builder, ISO_H)
+        for name in ("contact_point_gripper", "contact_point", "has_contact", "contact_spread",
+                     "contact_ambiguous"):  # fmt: skip
+            logs[key, name] = LogVectorOutput(iso.GetOutputPort(name), builder, ISO_H)
     logs["pose"] = LogVectorOutput(fk.get_output_port(), builder, ISO_H)
     simulator = Simulator(builder.Build())
     robot.set_initial_configuration(simulator.get_mutable_context())
@@ -129,6 +135,11 @@ def cpf_run():
         log = logger.FindLog(simulator.get_context())
         out["t"], out[key] = log.sample_times(), log.data().T
     return out
+
+
+@pytest.fixture(scope="module")
+def cpf_run():
+    return run_rig({True: dict(reuse_particles=True), False: dict(reuse_particles=False)})
 
 
 def push_errors(run, reuse: bool, frame: str = "gripper"):
@@ -159,6 +170,33 @@ def test_cpf_isolates_known_pushes(cpf_run):
     world = np.concatenate(push_errors(cpf_run, True, frame="world"))
     print(f"world frame: median {1e3 * np.median(world):.2f} mm")
     assert np.median(world) <= 0.010
+
+
+def steady_mean(run, key, port):
+    """Per push, the mean of an isolator output over the push's steady part."""
+    t = run["t"]
+    return np.array([run[key, port][(t >= t0 + SETTLE) & (t < t1), 0].mean()
+                     for t0, t1, _, _ in run["windows"]])  # fmt: skip
+
+
+def test_ambiguity_flag_marks_the_wrong_point_pushes(cpf_run):
+    """Pushes along the closing axis onto a finger's outer plate have a line of action that
+    also enters the other finger's bubble, 10-12 cm away: the CPF's pick is a coin toss (two
+    of them land on the wrong finger with particle reuse). The flag must mark every push that
+    went wrong and leave the others alone."""
+    errors = np.array([np.median(e) for e in push_errors(cpf_run, True)])
+    flagged = steady_mean(cpf_run, True, "contact_ambiguous")
+    spread = steady_mean(cpf_run, True, "contact_spread")
+    print(f"flagged fraction per push {np.round(flagged, 2).tolist()}; spread (mm) "
+          f"{np.round(1e3 * spread).tolist()}")  # fmt: skip
+    # Measured: pushes 0, 6, 9, 10, 16, 17 flagged in every step (spread 100-117 mm); the
+    # others never (spread 0); pushes 6 and 10 have 106 and 113 mm errors, the rest <= 1.8 mm.
+    assert np.all(np.isin(flagged, [0.0, 1.0]))  # a push is ambiguous throughout, or never
+    assert np.all(flagged[errors > 0.02] == 1.0)
+    assert 0 < np.sum(flagged == 1.0) < N_PUSHES
+    assert np.all(spread[flagged == 1.0] > 0.08)
+    assert np.all(spread[flagged == 0.0] < 0.03)
+    assert np.all(errors[flagged == 0.0] < 0.005)
 
 
 def test_no_force_no_contact(cpf_run):
@@ -271,7 +309,8 @@ def run_isolator(wrench, *, flag=1.0, bubbles=None, steps=3, pose=None):
         iso.GetInputPort("bubble_contact_points").FixValue(context, bubbles[1])
     simulator.AdvanceTo(steps * ISO_H)
     return {p: iso.GetOutputPort(p).Eval(context)
-            for p in ("has_contact", "contact_point", "contact_source")}  # fmt: skip
+            for p in ("has_contact", "contact_point", "contact_source", "contact_spread",
+                      "contact_ambiguous")}  # fmt: skip
 
 
 def test_isolator_prefers_bubbles_and_falls_back_to_cpf():
@@ -291,6 +330,60 @@ def test_isolator_prefers_bubbles_and_falls_back_to_cpf():
     np.testing.assert_array_equal(bubble["contact_point"], [1.0, 2.0, 3.0])
     none = run_isolator(wrench, flag=0.0, pose=X_WG)
     assert none["has_contact"][0] == 0.0 and none["contact_source"][0] == 0.0
+
+
+def test_ambiguity_flag_standalone():
+    """8 N straight into the right finger's outer plate (opening 0.03 m: the plate's face at
+    x = 0.075 m in gripper_frame): the line of action also enters the left bubble's inner face
+    (x about -0.03 m). 8 N into the right bubble's +y side (the test above): one place only."""
+    c_G, f_G = np.array([0.075, 0.01, 0.02]), np.array([-8.0, 0.0, 0.0])
+    plate = run_isolator(np.r_[np.cross(c_G, f_G), f_G])
+    print(f"plate push: spread {1e3 * plate['contact_spread'][0]:.1f} mm")
+    assert plate["contact_source"][0] == SOURCE_CPF
+    assert plate["contact_ambiguous"][0] == 1.0
+    assert 0.09 < plate["contact_spread"][0] < 0.12
+    c_G = np.array([0.05, 0.04 * np.sqrt(1.0 - (0.02 / 0.055) ** 2), 0.02])
+    f_G = 8.0 * np.array([0.25, -0.93, -0.25]) / np.linalg.norm([0.25, -0.93, -0.25])
+    side = run_isolator(np.r_[np.cross(c_G, f_G), f_G])
+    assert side["contact_source"][0] == SOURCE_CPF
+    assert np.linalg.norm(side["contact_point"] - c_G) < 0.005
+    assert side["contact_ambiguous"][0] == 0.0 and side["contact_spread"][0] < 0.03
+
+
+# ------------------------------------------------------------------ noisy wrench, averaging
+NOISE = dict(torque_noise_std=0.1, velocity_noise_std=1e-3)  # N m, rad/s on each joint
+
+
+@pytest.fixture(scope="module")
+def noisy_run(tmp_path_factory):
+    statistics = calibrate_residual_statistics(
+        duration=6.0, estimator_kwargs=dict(NOISE, noise_seed=1),
+        cache_dir=tmp_path_factory.mktemp("calibration"),
+    )  # fmt: skip
+    return run_rig({"raw": dict(average_wrench=False), "mean": dict(average_wrench=True)},
+                   estimator_kwargs=dict(NOISE, noise_seed=7), statistics=statistics)  # fmt: skip
+
+
+def test_running_mean_wrench_helps_with_noise(noisy_run):
+    """Joint torque noise 0.1 N m: isolating from the contact's running-mean wrench instead of
+    the last one. (Off by default: in the scenes, without noise, the contact's point and
+    patches move on the gripper while objects slide and the mean made it worse; see
+    tests/test_sensing_in_scene.py.)"""
+    medians = {}
+    for key in ("raw", "mean"):
+        errors = push_errors(noisy_run, key)
+        flat = np.concatenate(errors)
+        unambiguous = np.concatenate([e for e, a in zip(
+            errors, steady_mean(noisy_run, key, "contact_ambiguous"), strict=True) if a < 0.5])
+        medians[key] = np.median(flat), np.median(unambiguous)
+        print(f"{key}: median {1e3 * np.median(flat):.2f} mm, 90th pct "
+              f"{1e3 * np.quantile(flat, 0.9):.1f} mm; unflagged pushes median "
+              f"{1e3 * np.median(unambiguous):.2f} mm")  # fmt: skip
+    # Measured: raw median 6.85 mm (90th pct 46 mm; unflagged pushes 6.58 mm), running mean
+    # 3.03 mm (27.5 mm; unflagged 2.97 mm).
+    assert medians["mean"][0] <= 0.7 * medians["raw"][0]
+    assert medians["mean"][1] <= 0.7 * medians["raw"][1]
+    assert medians["mean"][0] <= 0.005
 
 
 @pytest.mark.parametrize("port", ["ee_wrench", "gripper_pose"])

@@ -6,7 +6,9 @@
   the isolator reads.
 - :class:`ContactIsolator`: per step, bubble contact points when a bubble sensor fires (the
   paper's real-robot order, Sec. V-E), else the contact particle filter of
-  :mod:`stucco_drake.core.contact_isolation` on the estimated end-effector wrench.
+  :mod:`stucco_drake.core.contact_isolation` on the estimated end-effector wrench, optionally
+  averaged over the contact's steps, with a flag for CPF isolations the wrench cannot decide
+  (:func:`line_of_action_ambiguity`).
 
 Pose convention (port ``gripper_pose``): a 7-vector [x, y, z, qw, qx, qy, qz], the position (m)
 of the origin of ``gripper_frame`` in world and the unit quaternion of its orientation R_WG
@@ -34,6 +36,11 @@ from stucco_drake.systems.wrench_estimator import N_ARM, make_robot_plant
 
 #: contact_source values.
 SOURCE_NONE, SOURCE_CPF, SOURCE_BUBBLE = 0.0, 1.0, 2.0
+#: Default of ContactIsolator's average_wrench. Off: with 0.1 N m joint torque noise the mean
+#: halves the rig's isolation error (tests/test_contact_isolation.py), but in the noise-free
+#: scenes, where patches move on the gripper as objects slide, it made errors worse
+#: (tests/test_sensing_in_scene.py cases: e.g. two-patch pushes 8.6 -> 24 mm median).
+AVERAGE_WRENCH_DEFAULT = False
 _INSIDE_TOLERANCE = 1e-4  # m: samples deeper than this inside another shape are hidden
 
 
@@ -158,6 +165,70 @@ class GripperPoseFromState(LeafSystem):
         output.SetFromVector(pose_vector(self._frame.CalcPoseInWorld(self._context)))
 
 
+# --------------------------------------------------------------------------------- ambiguity
+def line_of_action_ambiguity(cpf: ContactParticleFilter, torque, force, index: int, cost: float,
+                             *, radius: float = 0.015, link: float = 0.01,
+                             tolerance: float | None = None) -> tuple[float, int]:  # fmt: skip
+    """How far the isolated point's equally good alternatives lie, in G.
+
+    A single-contact wrench fixes only the force's line of action; where that line enters the
+    gripper surface at several admissible places (e.g. into one finger's outer plate and into
+    the other finger's inner bubble face), those places explain the wrench equally well and the
+    CPF's pick among them is a coin toss. This scores the samples within ``radius`` (m) of the
+    line of action of ``force`` (the isolation's fitted force, N) and ``torque`` (N m), keeps
+    the admissible ones whose cost is within ``cpf.torque_std + |force| * tolerance`` (N m) of
+    the isolation's ``cost`` (``tolerance``, m, absorbs the sample spacing; default the
+    filter's median nearest-sample distance), and links kept samples closer than ``link`` (m)
+    into locations.
+
+    Returns:
+        (rival, n_locations): the largest distance (m) from the isolated sample ``index`` to a
+        kept sample of another location (0 when there is only the isolated point's location),
+        and the number of locations (1: unambiguous; 0 when nothing is admissible).
+    """
+    torque, force = np.asarray(torque, dtype=float), np.asarray(force, dtype=float)
+    f2 = float(force @ force)
+    if f2 < 1e-12 or not np.isfinite(cost):
+        return 0.0, 0
+    if tolerance is None:
+        tolerance = _median_spacing(cpf)
+    u = force / np.sqrt(f2)
+    offset = cpf.points - np.cross(force, torque) / f2
+    along = offset @ u
+    near = np.einsum("ij,ij->i", offset, offset) - along**2 <= radius**2
+    near[index] = True
+    candidates = np.flatnonzero(near)
+    costs, _ = cpf.costs(candidates, torque, force)
+    good = candidates[costs <= cost + cpf.torque_std + np.sqrt(f2) * tolerance]
+    good = np.union1d(good, [index])
+    points = cpf.points[good]
+    # Single-linkage components of the kept samples (a few hundred at most: dense is fine).
+    linked = np.sum((points[:, None] - points[None]) ** 2, axis=2) <= link**2
+    label = np.full(len(points), -1)
+    n_locations = 0
+    for first in range(len(points)):
+        if label[first] >= 0:
+            continue
+        frontier = [first]
+        label[first] = n_locations
+        while frontier:
+            reached = np.flatnonzero(linked[frontier].any(axis=0) & (label < 0))
+            label[reached] = n_locations
+            frontier = reached.tolist()
+        n_locations += 1
+    others = label != label[np.searchsorted(good, index)]
+    distance = np.linalg.norm(points - cpf.points[index], axis=1)
+    rival = float(distance[others].max()) if others.any() else 0.0
+    return rival, n_locations
+
+
+def _median_spacing(cpf: ContactParticleFilter) -> float:
+    """Median distance (m) from a sample to its nearest other sample."""
+    if cpf.neighbours.shape[1] < 2:
+        return 0.0
+    return float(np.median(np.linalg.norm(cpf.points[cpf.neighbours[:, 1]] - cpf.points, axis=1)))
+
+
 # ----------------------------------------------------------------------------------- isolator
 @dataclasses.dataclass(frozen=True)
 class _IsolatorState:
@@ -170,6 +241,12 @@ class _IsolatorState:
     points_W: tuple = ()
     cost: float = 0.0
     source: float = SOURCE_NONE
+    spread: float = 0.0  # m, the rival distance of line_of_action_ambiguity
+    ambiguous: bool = False
+    # Sum of the CPF contact's wrenches [torque (N m); force (N)] in G and their count, for the
+    # running mean (average_wrench); None outside a CPF contact.
+    wrench_sum: np.ndarray | None = None
+    wrench_count: int = 0
 
 
 class ContactIsolator(LeafSystem):
@@ -182,6 +259,17 @@ class ContactIsolator(LeafSystem):
     ``reuse_particles`` is on; a wrench force below ``min_force`` (N) is too weak to isolate and
     gives no contact. Draws come from numpy Generators keyed by (``seed``, update count).
 
+    With ``average_wrench`` the CPF reads the running mean of the wrench (in ``gripper_frame``)
+    over the steps of the contact under way instead of the last one; the mean restarts with
+    each contact (any step without a CPF isolation ends it). For a contact point fixed on the
+    gripper every wrench satisfies tau = c x f, and so does their mean, whatever the force
+    does; averaging only removes estimator noise (and lags if the point slides on the gripper).
+
+    Each CPF isolation is checked for ambiguity (:func:`line_of_action_ambiguity`): when
+    its line of action enters the gripper at separate, equally good places more than
+    ``ambiguity_distance`` apart, the point is a guess between them and ``contact_ambiguous``
+    says so. (Alternatives closer than that are not flagged: the error they allow is small.)
+
     Args:
         time_step: update period (s).
         seed: the CPF's random seed (also seeds the surface sampling unless ``samples`` given).
@@ -190,6 +278,9 @@ class ContactIsolator(LeafSystem):
         n_bubbles: number of bubble sensors wired in (0: CPF only; the ports are then absent).
         filter_kwargs: settings for :class:`~stucco_drake.core.contact_isolation.
             ContactParticleFilter` (stds, particle counts, friction angle).
+        average_wrench: isolate from the contact's running-mean wrench (see above).
+        ambiguity_distance: an equally good alternative location farther than this (m) from
+            the isolated point makes the isolation ambiguous.
 
     Input ports:
         ee_wrench: (6,) [torque (N m); force (N)] on the gripper at the origin of
@@ -205,12 +296,20 @@ class ContactIsolator(LeafSystem):
         contact_point_gripper: (3,) the same point in ``gripper_frame`` (m).
         isolation_cost: (1,) CPF torque residual (N m); 0 for bubble points.
         contact_source: (1,) 0 none, 1 CPF, 2 bubble.
+        contact_spread: (1,) for a CPF point, the distance (m) from the isolated sample to the
+            farthest sample of another location on the gripper that explains the wrench as
+            well (see :func:`line_of_action_ambiguity`); 0 when there is no such location, for
+            bubble points and without contact. On this gripper 5-12 cm when the line of action
+            runs along the closing axis through both fingers.
+        contact_ambiguous: (1,) 1.0 when contact_spread > ``ambiguity_distance``.
         contact_points: abstract list of (3,) world points (m), all points of this step.
     """
 
     def __init__(self, time_step: float, *, seed: int, samples=None, spacing: float = 0.004,
                  opening: float = 0.03, n_bubbles: int = 0, min_force: float = 1.0,
-                 reuse_particles: bool = True, filter_kwargs: dict | None = None):  # fmt: skip
+                 reuse_particles: bool = True, filter_kwargs: dict | None = None,
+                 average_wrench: bool = AVERAGE_WRENCH_DEFAULT,
+                 ambiguity_distance: float = 0.03):  # fmt: skip
         super().__init__()
         if not (np.isfinite(time_step) and time_step > 0):
             raise ValueError(f"ContactIsolator: time_step must be > 0, got {time_step}")
@@ -221,6 +320,9 @@ class ContactIsolator(LeafSystem):
         self.filter = ContactParticleFilter(*samples, **(filter_kwargs or {}))
         self._min_force = float(min_force)
         self._reuse = bool(reuse_particles)
+        self._average = bool(average_wrench)
+        self._ambiguity_distance = float(ambiguity_distance)
+        self._spacing = _median_spacing(self.filter)
         self._n_bubbles = int(n_bubbles)
         self._wrench = self.DeclareVectorInputPort("ee_wrench", 6)
         self._pose = self.DeclareVectorInputPort("gripper_pose", 7)
@@ -238,6 +340,8 @@ class ContactIsolator(LeafSystem):
             ("contact_point_gripper", 3, lambda s: s.point_G),
             ("isolation_cost", 1, lambda s: [s.cost]),
             ("contact_source", 1, lambda s: [s.source]),
+            ("contact_spread", 1, lambda s: [s.spread]),
+            ("contact_ambiguous", 1, lambda s: [float(s.ambiguous)]),
         ):
             self.DeclareVectorOutputPort(name, size, self._make_output(get),
                                          prerequisites_of_calc=ticket)  # fmt: skip
@@ -283,24 +387,38 @@ class ContactIsolator(LeafSystem):
             torque, force = R_GW.multiply(wrench[:3]), R_GW.multiply(wrench[3:])
             if np.linalg.norm(force) >= self._min_force:
                 rng = np.random.default_rng([self._seed, step])
-                previous = old.particles if (self._reuse and old.source == SOURCE_CPF) else None
+                ongoing = old.source == SOURCE_CPF
+                previous = old.particles if (self._reuse and ongoing) else None
+                total, count = np.r_[torque, force], 1
+                if self._average and ongoing and old.wrench_sum is not None:
+                    total, count = old.wrench_sum + total, old.wrench_count + 1
+                    torque, force = total[:3] / count, total[3:] / count
                 result, particles = self.filter.step(torque, force, rng, previous)
                 if np.isfinite(result.cost):
                     point_W = X_WG.multiply(result.point)
+                    rival, _ = line_of_action_ambiguity(
+                        self.filter, torque, result.force, result.index, result.cost,
+                        tolerance=self._spacing,
+                    )  # fmt: skip
                     new = dataclasses.replace(
                         new, particles=particles, point_W=point_W, point_G=result.point,
                         points_W=(point_W,), cost=result.cost, source=SOURCE_CPF,
+                        spread=rival, ambiguous=rival > self._ambiguity_distance,
+                        wrench_sum=total,
+                        wrench_count=count,
                     )  # fmt: skip
         state.get_mutable_abstract_state(self._state).set_value(new)
 
 
 __all__ = [
+    "AVERAGE_WRENCH_DEFAULT",
     "SOURCE_BUBBLE",
     "SOURCE_CPF",
     "SOURCE_NONE",
     "ContactIsolator",
     "GripperPoseFromState",
     "gripper_collision_shapes",
+    "line_of_action_ambiguity",
     "pose_from_vector",
     "pose_vector",
     "sample_gripper_surface",
