@@ -114,18 +114,27 @@ def make_table(
     if runs < 1:
         raise ValueError(f"runs must be positive, got {runs}")
     out = Path(out)
-    # Seed-major, so that an interrupted table has as many runs of every scene.
-    episodes = [(scene, seed) for seed in range(runs) for scene in scenes]
-    _simulate_missing(episodes, out, executor, progress, sources)
-    tasks = [(scene, seed, method) for scene, seed in episodes for method in methods]
     results = RunResults(out / "runs.csv")
     replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources))
-    run_table(tasks, replay_task, results, executor, progress)
-    wanted = set(tasks)
-    rows = [row for row in results.rows() if row_key(row) in wanted]
-    write_table(rows, scenes, methods, out / "table.md")
-    plot_fmi_ce(rows, out / "fmi_ce.png", scenes, methods)
-    return rows
+    wanted = {(scene, seed, method) for seed in range(runs) for scene in scenes
+              for method in methods}  # fmt: skip
+
+    def tabulate() -> list[dict]:
+        rows = [row for row in results.rows() if row_key(row) in wanted]
+        write_table(rows, scenes, methods, out / "table.md")
+        plot_fmi_ce(rows, out / "fmi_ce.png", scenes, methods)
+        return rows
+
+    # Seed by seed: simulate that seed's episodes of every scene, replay them and rewrite the
+    # table, so an interrupted table shows complete rows for every seed it reached.
+    for seed in range(runs):
+        seed_tasks = [(scene, seed, method) for scene in scenes for method in methods]
+        if set(seed_tasks) <= results.done():
+            continue
+        _simulate_missing([(scene, seed) for scene in scenes], out, executor, progress, sources)
+        run_table(seed_tasks, replay_task, results, executor, progress)
+        tabulate()
+    return tabulate()
 
 
 def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES) -> None:
