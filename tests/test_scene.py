@@ -192,6 +192,22 @@ def test_push_moves_box_by_step_minus_gap_and_wall_holds():
     np.testing.assert_allclose(X_wall.translation(), [0.335, 0.0, 0.1], atol=1e-12)
 
 
+def test_friction_override_reaches_the_contact_solver():
+    # A box pushed on a frictionless table keeps sliding after the push stops; with the files'
+    # friction (table 0.6, box 0.5: combined 0.55) it stops with the gripper.
+    box_only = PUSH_SCENE.split("- name: wall")[0]
+    moved = {}
+    for label, friction in (("files", ""), ("frictionless", "friction:\n  table: 0.0\n")):
+        scene = load_scene_text(_scene_text(box_only + friction, actions=[(1, 0), (0, 0)]))
+        records, _ = play(build_scene(scene))
+        moved[label] = [r.objects["box"][0] - records[0].objects["box"][0] for r in records[1:]]
+    still, sliding = moved["files"], moved["frictionless"]
+    assert abs(still[1] - still[0]) < 0.001, still  # at rest after the push
+    assert sliding[1] - sliding[0] > 0.005, sliding  # still sliding a whole action later
+    with pytest.raises(SceneFileError, match=r"friction\.shelf: the scene has no model 'shelf'"):
+        build_scene(load_scene_text(_scene_text(box_only + "friction:\n  shelf: 0.2\n")))
+
+
 @pytest.mark.parametrize(
     "patch, key",
     [
@@ -204,6 +220,7 @@ def test_push_moves_box_by_step_minus_gap_and_wall_holds():
         ("tracker:\n  lenght: 0.02\n", "tracker"),
         ("target: nothing\n", "target"),
         ("actions:\n  - [1, 0, 3]\n", "actions[0]"),
+        ("friction:\n  table: -0.1\n", "friction.table"),
     ],
 )
 def test_malformed_scene_file_fails_with_one_line(tmp_path, patch, key):

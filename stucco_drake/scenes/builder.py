@@ -26,10 +26,15 @@ import dataclasses
 import math
 
 import numpy as np
-from pydrake.geometry import CollisionFilterDeclaration, MeshcatVisualizer
+from pydrake.geometry import (
+    CollisionFilterDeclaration,
+    MeshcatVisualizer,
+    ProximityProperties,
+    RoleAssign,
+)
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import ModelDirectives, Parser, ProcessModelDirectives
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.controllers import InverseDynamicsController
 from pydrake.systems.framework import Diagram, DiagramBuilder
@@ -37,7 +42,7 @@ from pydrake.systems.primitives import MatrixGain
 
 from stucco_drake.models import add_iiwa14_with_bubble_gripper, configure_parser
 from stucco_drake.scenes.primitives import add_primitive
-from stucco_drake.scenes.scene_file import Primitive, SceneFile
+from stucco_drake.scenes.scene_file import Primitive, SceneFile, SceneFileError
 from stucco_drake.systems.planar_controller import (
     ArmKinematics,
     PlanarActionSequence,
@@ -143,6 +148,20 @@ def _filter_base_wrist_contact(plant: MultibodyPlant, scene_graph) -> None:
     )
 
 
+def _override_friction(plant: MultibodyPlant, scene_graph, scene: SceneFile) -> None:
+    """Gives every collision geometry of each model in ``scene.friction`` that friction."""
+    inspector = scene_graph.model_inspector()
+    for name, mu in scene.friction.items():
+        if not plant.HasModelInstanceNamed(name):
+            raise SceneFileError(f"{scene.name}: friction.{name}: the scene has no model {name!r}")
+        instance = plant.GetModelInstanceByName(name)
+        for index in plant.GetBodyIndices(instance):
+            for gid in plant.GetCollisionGeometriesForBody(plant.get_body(index)):
+                properties = ProximityProperties(inspector.GetProximityProperties(gid))
+                properties.UpdateProperty("material", "coulomb_friction", CoulombFriction(mu, mu))
+                scene_graph.AssignRole(plant.get_source_id(), gid, properties, RoleAssign.kReplace)
+
+
 def _robot_joints(plant: MultibodyPlant):
     names = (IIWA, GRIPPER)
     instances = [plant.GetModelInstanceByName(n) for n in names]
@@ -234,6 +253,7 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
     column = pedestal(scene)
     for primitive in scene.primitives + ([column] if column else []):
         add_primitive(plant, primitive)
+    _override_friction(plant, scene_graph, scene)
     plant.Finalize()
     _filter_base_wrist_contact(plant, scene_graph)
 

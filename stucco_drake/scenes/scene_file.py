@@ -135,6 +135,9 @@ class SceneFile:
         control: see :class:`ControlParams`.
         tracker_preset: "sim" or "real", the base of the tracker parameters.
         tracker: overrides of :class:`~stucco_drake.core.SoftTrackingParams` fields.
+        friction: model instance name -> Coulomb friction (static = dynamic) given to every
+            collision geometry of that model, replacing its file's (e.g. a table that must
+            reproduce another simulator's combined object-ground friction).
     """
 
     name: str = ""
@@ -160,6 +163,7 @@ class SceneFile:
     control: ControlParams = dataclasses.field(default_factory=ControlParams)
     tracker_preset: str = "sim"
     tracker: dict[str, float] = dataclasses.field(default_factory=dict)
+    friction: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def tracker_params(self) -> SoftTrackingParams:
         """The tracker parameters: ``tracker`` overrides on top of ``tracker_preset``."""
@@ -241,6 +245,8 @@ def _check(scene: SceneFile) -> None:
         ok = len(action) == 2 and all(math.isfinite(a) for a in action)
         need(ok, f"actions[{i}]", f"expected two finite numbers, got {action}")
     need(scene.action_duration > 0, "action_duration", "must be > 0")
+    for name, mu in scene.friction.items():
+        need(math.isfinite(mu) and mu >= 0, f"friction.{name}", f"must be >= 0, got {mu}")
     plant = scene.plant
     need(plant.time_step > 0, "plant.time_step", "the plant must be discrete (> 0)")
     # Drake checks these only when the plant is built; a scene file should fail on loading.
