@@ -224,6 +224,24 @@ class RobotObjectContacts(LeafSystem):
         output.set_value(found)
 
 
+class ActionClock(LeafSystem):
+    """Output ``action_index``: floor(t / duration) as a 1-vector, the action under way.
+
+    The scene's built-in action sequence is the action clock of a BOR Diagram playing a fixed
+    list; with external actions (one ``planar_step`` per action, fed by a policy) the detector
+    still needs it, and the planar controller starts a new action on the same grid.
+    """
+
+    def __init__(self, duration: float):
+        super().__init__()
+        self._duration = float(duration)
+        self.DeclareVectorOutputPort("action_index", 1, self._calc)
+
+    def _calc(self, context, output):
+        # The same tolerance as the scene's action sequence: t = k * duration counts as k.
+        output.SetFromVector([float(np.floor(context.get_time() / self._duration + 1e-6))])
+
+
 # --------------------------------------------------------------------------------- building
 def _arm_selectors(robot_plant: MultibodyPlant):
     """(S, T): arm state [q; v] (14) = S x_robot, arm torques (7) = T tau_robot."""
@@ -253,6 +271,7 @@ def build_bor_diagram(
     tracker_params=None,
     threshold: float | None = None,
     estimator_gain: float = 50.0,
+    external_actions: bool = False,
 ) -> BorDiagram:
     """Builds the BOR Diagram of ``scene`` (a SceneFile or a scene name) with ``method``.
 
@@ -266,11 +285,13 @@ def build_bor_diagram(
         threshold: detection threshold on the chi-square statistic (default
             :func:`~stucco_drake.systems.contact_detector.default_threshold`).
         estimator_gain: the momentum observer's bandwidth K_O (1/s).
+        external_actions: export a ``planar_step`` input, (dx, dy) in m (world), read at the
+            start of each action, instead of playing ``scene.actions`` (closed-loop policies).
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
     # The grasp executor sits in the scene from the start (transparent until a grasp starts),
     # so the grasp continues this very simulation and shows in its recording.
-    built = build_grasp_scene(scene, meshcat=meshcat, external_actions=False)
+    built = build_grasp_scene(scene, meshcat=meshcat, external_actions=external_actions)
     h = float(scene.plant.time_step)
     fingers = np.full(2, scene.gripper_start.finger_position)
     X_WB = robot_base_pose(scene)
@@ -302,7 +323,13 @@ def build_bor_diagram(
     ))  # fmt: skip
     for name in ("residual_chi2", "ee_position"):
         builder.Connect(estimator.GetOutputPort(name), detector.GetInputPort(name))
-    builder.Connect(sub.GetOutputPort("action_index"), detector.GetInputPort("action_index"))
+    if external_actions:
+        builder.ExportInput(sub.GetInputPort("planar_step"), "planar_step")
+        clock = builder.AddNamedSystem("action_clock", ActionClock(scene.action_duration))
+        action_index = clock.get_output_port()
+    else:
+        action_index = sub.GetOutputPort("action_index")
+    builder.Connect(action_index, detector.GetInputPort("action_index"))
 
     pose = builder.AddNamedSystem(
         "gripper_pose", GripperPoseFromState(X_WB=X_WB, finger_positions=fingers)

@@ -8,6 +8,8 @@ detected contact points with their dx, which object each truly touched, the plan
 every object and the gripper's distance to each; at the end the plant's state. Replaying a
 log (:func:`stucco_drake.eval.replay.replay`) needs the gripper's pxpen
 (:func:`log_penetration`) and grasps from the logged final state (:func:`grasp_from_log`).
+The recording itself (:class:`EpisodeRecorder`) is shared with the closed-loop training
+trials of :mod:`stucco_drake.training`.
 
 Units: m, rad, s; poses in the world frame.
 """
@@ -117,6 +119,77 @@ class GripperObjectDistance:
 
 
 # ------------------------------------------------------------------------------- recording
+class EpisodeRecorder:
+    """Collects an :class:`EpisodeLog` action by action from a running BOR Diagram.
+
+    Whatever drives the simulation (a fixed action list through
+    :func:`~stucco_drake.bor_episode.run_episode`, or a closed-loop policy) calls
+    :meth:`on_action` once per action, after that action's contacts are formed, then
+    :meth:`log`. Per action it keeps the end-effector pose, the detected contacts with their
+    dx, the object each truly touched, every object's planar pose and the gripper's distance
+    to each object (m, rad, world frame).
+    """
+
+    def __init__(self, bor, context):
+        self._bor, self._context = bor, context
+        built = bor.scene
+        self._plant_context = built.plant.GetMyContextFromRoot(context)
+        self._assembler_context = bor.assembler.GetMyContextFromRoot(context)
+        self.names, self._specs, self._owner = planar_objects(built, self._plant_context)
+        self._index = {name: k for k, name in enumerate(self.names)}
+        self._distance = GripperObjectDistance(built.scene.gripper_start.finger_position)
+        self._poses = [planar_poses(built, self._plant_context, self.names)]
+        self._distances, self._positions, self._rotations = [], [], []
+        self._points, self._dx, self._objects, self._offsets = [], [], [], [0]
+
+    def on_action(self, k: int, contacts) -> None:
+        """Record action ``k`` (its ``ActionContacts``), with the context at its end."""
+        bor, built, plant_context = self._bor, self._bor.scene, self._plant_context
+        truth = bor.diagram.GetOutputPort("action_truth").Eval(self._context)
+        X_WE = bor.assembler.GetOutputPort("ee_pose").Eval(self._assembler_context)
+        self._positions.append(X_WE.translation().copy())
+        self._rotations.append(X_WE.rotation().matrix().copy())
+        self._points.append(np.asarray(contacts.points, dtype=np.float64).reshape(-1, 3))
+        self._dx.append(np.asarray(contacts.dx, dtype=np.float64).reshape(-1, 3))
+        self._objects.extend(self._index.get(t.name, -1) for t in truth)
+        self._offsets.append(self._offsets[-1] + len(self._points[-1]))
+        self._poses.append(planar_poses(built, plant_context, self.names))
+        self._distances.append(self._distance(built, plant_context, self.names))
+
+    def log(self, scene: str, seed: int, action_noise: float, info: dict) -> EpisodeLog:
+        """The log of what was recorded; the plant's current [q; v] is its ``final_state``.
+
+        ``info`` is added to the producer's metadata (producer, target, finger position,
+        final simulated time in s).
+        """
+        built, plant_context = self._bor.scene, self._plant_context
+        return EpisodeLog(
+            scene=scene,
+            seed=int(seed),
+            action_noise=float(action_noise),
+            ee_position=np.array(self._positions).reshape(-1, 3),
+            ee_rotation=np.array(self._rotations).reshape(-1, 3, 3),
+            contact_offsets=np.array(self._offsets),
+            contact_points=np.concatenate(self._points or [np.zeros((0, 3))]).reshape(-1, 3),
+            contact_dx=np.concatenate(self._dx or [np.zeros((0, 3))]).reshape(-1, 3),
+            contact_object=np.array(self._objects, dtype=np.int64),
+            object_names=self.names,
+            object_poses=np.array(self._poses),
+            object_shapes=self._specs,
+            shape_object=self._owner,
+            robot_object_distance=np.array(self._distances).reshape(-1, len(self.names)),
+            robot_shape=np.zeros(0),
+            final_state=built.plant.GetPositionsAndVelocities(plant_context),
+            info={
+                "producer": "drake",
+                "target": built.scene.target,
+                "finger_position": float(built.scene.gripper_start.finger_position),
+                "final_time_s": float(self._context.get_time()),
+                **info,
+            },
+        )
+
+
 def record_episode(
     scene: SceneFile | str,
     seed: int,
@@ -134,57 +207,14 @@ def record_episode(
     base = load_scene(scene) if isinstance(scene, str) else scene
     scene = perturbed_scene(base, seed, action_noise)
     bor = build_bor_diagram(scene, method, seed)
-    built = bor.scene
     simulator = make_bor_simulator(bor)
-    context = simulator.get_mutable_context()
-    plant_context = built.plant.GetMyContextFromRoot(context)
-    names, specs, owner = planar_objects(built, plant_context)
-    index = {name: k for k, name in enumerate(names)}
-    distance = GripperObjectDistance(scene.gripper_start.finger_position)
-    assembler_context = bor.assembler.GetMyContextFromRoot(context)
-    poses, distances, positions, rotations = [planar_poses(built, plant_context, names)], [], [], []
-    points, dx, objects, offsets = [], [], [], [0]
-
-    def on_action(k, contacts):
-        truth = bor.diagram.GetOutputPort("action_truth").Eval(context)
-        X_WE = bor.assembler.GetOutputPort("ee_pose").Eval(assembler_context)
-        positions.append(X_WE.translation().copy())
-        rotations.append(X_WE.rotation().matrix().copy())
-        points.append(np.asarray(contacts.points, dtype=np.float64).reshape(-1, 3))
-        dx.append(np.asarray(contacts.dx, dtype=np.float64).reshape(-1, 3))
-        objects.extend(index.get(t.name, -1) for t in truth)
-        offsets.append(offsets[-1] + len(points[-1]))
-        poses.append(planar_poses(built, plant_context, names))
-        distances.append(distance(built, plant_context, names))
-
+    recorder = EpisodeRecorder(bor, simulator.get_mutable_context())
     result = run_episode(scene, method, seed, n_actions, bor=bor, simulator=simulator,
-                         on_action=on_action)
-    return EpisodeLog(
-        scene=base.name,
-        seed=int(seed),
-        action_noise=float(action_noise),
-        ee_position=np.array(positions).reshape(-1, 3),
-        ee_rotation=np.array(rotations).reshape(-1, 3, 3),
-        contact_offsets=np.array(offsets),
-        contact_points=np.concatenate(points).reshape(-1, 3),
-        contact_dx=np.concatenate(dx).reshape(-1, 3),
-        contact_object=np.array(objects, dtype=np.int64),
-        object_names=names,
-        object_poses=np.array(poses),
-        object_shapes=specs,
-        shape_object=owner,
-        robot_object_distance=np.array(distances).reshape(-1, len(names)),
-        robot_shape=np.zeros(0),
-        final_state=built.plant.GetPositionsAndVelocities(plant_context),
-        info={
-            "producer": "drake",
-            "target": base.target,
-            "finger_position": float(scene.gripper_start.finger_position),
-            "final_time_s": float(context.get_time()),
-            "wall_time_s": float(result.wall_time_s),
-            "live": {"method": method, "ce_cm": float(result.ce_cm), "fmi": float(result.fmi)},
-        },
-    )
+                         on_action=recorder.on_action)
+    return recorder.log(base.name, seed, action_noise, {
+        "wall_time_s": float(result.wall_time_s),
+        "live": {"method": method, "ce_cm": float(result.ce_cm), "fmi": float(result.fmi)},
+    })
 
 
 # ------------------------------------------------------------------------------- replaying

@@ -14,6 +14,7 @@ from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES
 from stucco_drake.scenes import SceneFileError
 from stucco_drake.scenes.cli_sim import add_sim_command
+from stucco_drake.sweep_cli import add_sweep_command
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -65,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES})
     add_run_command(commands)
     add_diagram_command(commands)
+    add_sweep_command(commands)
     return parser
 
 
