@@ -55,21 +55,24 @@ def produce_episode(episode: tuple[str, int], out: str, source: EpisodeSource) -
     return str(path)
 
 
+def load_cached_log(out, scene: str, seed: int) -> EpisodeLog:
+    """The cached log of episode (scene, seed) under ``out``; ValueError if it holds another."""
+    log = EpisodeLog.load(episode_path(Path(out), scene, seed))
+    if (log.scene, log.seed) != (scene, seed):
+        raise ValueError(f"log of {scene}_{seed} holds episode {log.scene}_{log.seed}")
+    return log
+
+
 def replay_cached(task: tuple[str, int, str], out: str, sources: Sources) -> dict:
     """One run (scene, seed, method) replayed from its cached log, with the scene source's
     pxpen and grasp (runs in a worker)."""
     scene, seed, method = task
-    log = EpisodeLog.load(episode_path(Path(out), scene, seed))
-    if (log.scene, log.seed) != (scene, seed):
-        raise ValueError(f"log of {scene}_{seed} holds episode {log.scene}_{log.seed}")
-    source = sources[scene]
-    penetration = None
-    if method == "stucco" and source.penetration is not None:
-        penetration = source.penetration(log)
-    return replay(log, method, penetration=penetration, grasp=source.grasp)
+    log, source = load_cached_log(out, scene, seed), sources[scene]
+    return replay(log, method, penetration=source.penetration_for(log, method),
+                  grasp=source.grasp)
 
 
-def _simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
+def simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
                       sources: Sources) -> None:
     """Simulate the episodes whose logs are not cached yet, in parallel."""
     missing = [e for e in episodes if not episode_path(out, *e).exists()]
@@ -131,7 +134,7 @@ def make_table(
         seed_tasks = [(scene, seed, method) for scene in scenes for method in methods]
         if set(seed_tasks) <= results.done():
             continue
-        _simulate_missing([(scene, seed) for scene in scenes], out, executor, progress, sources)
+        simulate_missing([(scene, seed) for scene in scenes], out, executor, progress, sources)
         run_table(seed_tasks, replay_task, results, executor, progress)
         tabulate()
     return tabulate()

@@ -33,6 +33,13 @@ class EpisodeSource:
     penetration: Callable[[EpisodeLog], RobotPenetration] | None = None
     grasp: GraspCheck | None = None
 
+    def penetration_for(self, log: EpisodeLog, method: str) -> RobotPenetration | None:
+        """The pxpen ``method`` needs on ``log``: STUCCO's from ``penetration``; None for the
+        other methods, or when the log's primitive robot shape serves (replay builds it)."""
+        if method == "stucco" and self.penetration is not None:
+            return self.penetration(log)
+        return None
+
 
 #: The synthetic planar scenes (no Drake): no grasp.
 SYNTHETIC_SOURCES: dict[str, EpisodeSource] = {

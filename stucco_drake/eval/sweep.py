@@ -33,7 +33,12 @@ from stucco_drake.core.baselines import (
     KMeansParams,
 )
 from stucco_drake.core.params import SoftTrackingParams
-from stucco_drake.eval.cli_table import _simulate_missing, check_names, episode_path
+from stucco_drake.eval.cli_table import (
+    check_names,
+    episode_path,
+    load_cached_log,
+    simulate_missing,
+)
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.replay import replay
 from stucco_drake.eval.results import RunResults
@@ -166,14 +171,9 @@ def replay_combination(task: tuple[str, int, str], out: str, method: str,
     """One sweep run (scene, seed, combination label) replayed from its cached log, with the
     scene source's pxpen (runs in a worker); its row's ``method`` is the label."""
     scene, seed, label = task
-    log = EpisodeLog.load(episode_path(Path(out), scene, seed))
-    if (log.scene, log.seed) != (scene, seed):
-        raise ValueError(f"log of {scene}_{seed} holds episode {log.scene}_{log.seed}")
-    source = sources[scene]
-    penetration = None
-    if method == "stucco" and source.penetration is not None:
-        penetration = source.penetration(log)
-    row = replay(log, method, params=combos[label], penetration=penetration)
+    log, source = load_cached_log(out, scene, seed), sources[scene]
+    row = replay(log, method, params=combos[label],
+                 penetration=source.penetration_for(log, method))
     return {**row, "method": label}
 
 
@@ -271,7 +271,7 @@ def run_sweep(
     grid = parse_grid(method, None) if grid is None else grid
     out = Path(out)
     wanted = [(scene, seed) for scene in scenes for seed in range(trials)]
-    _simulate_missing(wanted, out, executor, progress, sources)
+    simulate_missing(wanted, out, executor, progress, sources)
     kept = kept_trials(out, wanted)
     if not kept:
         raise ValueError(f"all {len(wanted)} trials are discarded: nothing to tune on")
