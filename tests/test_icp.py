@@ -12,7 +12,11 @@ from stucco_drake.core.icp import (
     sample_outline,
     transform,
 )
-from stucco_drake.core.target_pose import estimate_target_pose, restart_penetration
+from stucco_drake.core.target_pose import (
+    estimate_target_pose,
+    penetration_window,
+    restart_penetration,
+)
 
 #: The paper's cracker box (half extents, m) and a 1.2x tomato can (radius, m).
 BOX = BoxSdf((0.0308, 0.0788, 0.1035))
@@ -271,6 +275,48 @@ def test_penetration_picks_the_side_the_robot_was_not_on(disc_penetration):
         )[0]
         > 0.0
     )
+
+
+def test_since_touch_ignores_configs_from_before_the_target_was_pushed(disc_penetration):
+    """The robot first swept the area where the box now lies (the box was pushed there later),
+    then slid along its face. Every config counted, the true pose penetrates the early sweep
+    and loses; counting only the configs since the segment was last touched, it wins."""
+    rng = np.random.default_rng(31)
+    truth = np.array([-0.1, 0.25, 2.0])
+    hx, hy = BOX.half_extents[:2]
+    along = np.linspace(-hy, hy, 20)
+    face = transform(truth[None], np.column_stack([np.full(20, hx), along]))[0]
+    points = lift(face + rng.normal(0, NOISE, face.shape))
+    inside = np.stack(np.meshgrid([-0.015, 0.0, 0.015], np.linspace(-0.06, 0.06, 13)), -1)
+    sweep = transform(truth[None], inside.reshape(-1, 2))[0]
+    slide = transform(truth[None], np.column_stack([np.full(20, hx + 0.021), along]))[0]
+    configs = lift(np.concatenate([sweep, slide]))
+    steps = len(sweep) + np.arange(20)  # point i was sensed at config len(sweep) + i
+    labels = np.zeros(20, dtype=int)
+    results = {}
+    for rule in ("all", "since_touch"):
+        estimate = estimate_target_pose(
+            np.random.default_rng(1), points, labels, BOX, disc_penetration, configs,
+            penetration_configs=rule, point_steps=steps,
+        )  # fmt: skip
+        results[rule] = pose_errors(estimate.pose, truth)
+    assert results["all"][0] > 0.03
+    position, yaw = results["since_touch"]
+    assert position < 0.01 and np.degrees(yaw) < 3.0
+
+
+def test_penetration_window():
+    assert penetration_window(10, "all") == slice(0, 10)
+    assert penetration_window(10, "latest") == slice(9, 10)
+    assert penetration_window(10, 3) == slice(7, 10)
+    assert penetration_window(10, "since_touch", np.array([2, 6, 4])) == slice(6, 10)
+    # A point sensed after the last config passed still leaves x_t to check.
+    assert penetration_window(10, "since_touch", np.array([12])) == slice(9, 10)
+    with pytest.raises(ValueError, match="needs point_steps"):
+        penetration_window(10, "since_touch")
+    for bad in (0, "first", True):
+        with pytest.raises(ValueError, match="penetration_configs"):
+            penetration_window(10, bad)
 
 
 def test_bad_input_names_the_argument():

@@ -14,6 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from stucco_drake.core.baselines import TRACKER_NAMES, make_tracker
+from stucco_drake.core.contact_motion import DX_MODELS, contact_motion
 from stucco_drake.core.metrics import ambiguity, contact_error, fowlkes_mallows
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.sdf import GridSdf
@@ -72,6 +73,27 @@ def run_ambiguity(log: EpisodeLog) -> float:
     return ambiguity(log.robot_object_distance[:, touched], in_contact)
 
 
+def observed_dx(log: EpisodeLog, dx_model: str, penetration: RobotPenetration | None) -> np.ndarray:
+    """(N, 3) every contact's motion (m, world frame) under ``dx_model`` (see
+    :mod:`stucco_drake.core.contact_motion`): the logged ``contact_dx`` for ``"ee"``; for
+    ``"normal"`` its signed projection onto the robot's outward normal at the contact, the
+    robot posed where it was logged after that contact's action."""
+    if dx_model == "ee":
+        return log.contact_dx.copy()
+    if dx_model not in DX_MODELS:
+        raise ValueError(f"dx_model: expected one of {DX_MODELS}, got {dx_model!r}")
+    if penetration is None:
+        raise ValueError("dx_model 'normal' needs the robot's geometry: pass penetration=")
+    dx = np.empty_like(log.contact_dx)
+    for t in range(log.n_actions):  # per action: each has its own end-effector pose
+        lo, hi = log.contact_offsets[t], log.contact_offsets[t + 1]
+        dx[lo:hi] = contact_motion(
+            dx_model, log.contact_dx[lo:hi], log.contact_points[lo:hi], penetration.robot_sdf,
+            log.ee_position[t], log.ee_rotation[t],
+        )  # fmt: skip
+    return dx
+
+
 def replay(
     log: EpisodeLog,
     method: str,
@@ -80,6 +102,7 @@ def replay(
     *,
     penetration: RobotPenetration | None = None,
     grasp: GraspCheck | None = None,
+    dx_model: str = "ee",
 ) -> dict:
     """Feed ``log`` to a fresh ``method`` tracker action by action and score the result.
 
@@ -91,6 +114,11 @@ def replay(
         penetration: the robot's pxpen for STUCCO (default: built from ``log.robot_shape``).
         grasp: ``grasp(log, tracker) -> bool | None`` run after the last action; None leaves
             the row's ``grasp_success`` empty.
+        dx_model: how far each contact point moves, for every method alike: ``"ee"`` (the
+            paper: the end-effector's displacement while in contact) or ``"normal"`` (its
+            signed component along the robot's outward normal at the contact, see
+            :func:`observed_dx`; a deviation from the paper). ``"normal"`` uses
+            ``penetration``'s robot geometry, built from the log as for STUCCO when omitted.
 
     Returns:
         A row with :data:`ROW_FIELDS`: ``ce_cm`` mean distance (cm) of the tracked points to
@@ -100,13 +128,17 @@ def replay(
     """
     if method not in TRACKER_NAMES:
         raise ValueError(f"unknown method {method!r} (known: {', '.join(TRACKER_NAMES)})")
-    if method == "stucco" and penetration is None:
+    if dx_model not in DX_MODELS:
+        raise ValueError(f"dx_model: expected one of {DX_MODELS}, got {dx_model!r}")
+    if (method == "stucco" or dx_model != "ee") and penetration is None:
         penetration = log_penetration(log)
+    dx_all = observed_dx(log, dx_model, penetration)
     tracker = make_tracker(method, params, penetration)
     rng = np.random.default_rng(log.seed if seed is None else seed)
     start = time.perf_counter()
     for t in range(log.n_actions):
-        points, dx, _ = log.contacts(t)
+        points, _, _ = log.contacts(t)
+        dx = dx_all[log.contact_offsets[t] : log.contact_offsets[t + 1]]
         tracker.update(rng, log.ee_position[t], points, dx, log.ee_rotation[t])
     wall = time.perf_counter() - start
     if tracker.n_contacts != log.n_contacts:

@@ -1,0 +1,84 @@
+"""The contact-motion observation models: the paper's EE displacement and its normal part."""
+
+from unittest.mock import ANY
+
+import numpy as np
+import pytest
+
+from stucco_drake.core import BoxSdf
+from stucco_drake.core.contact_motion import (
+    contact_motion,
+    project_onto_normals,
+    robot_surface_normals,
+)
+from stucco_drake.core.sdf import GridSdf
+from stucco_drake.eval.replay import log_penetration, observed_dx, replay
+from stucco_drake.eval.synthetic_episode import synthetic_episode
+
+
+@pytest.fixture(scope="module")
+def box_robot() -> GridSdf:
+    """A 4 x 2 x 2 cm box end effector in its frame E, as a 1 mm grid."""
+    return GridSdf.build(
+        BoxSdf((0.02, 0.01, 0.01)), [-0.03, -0.02, -0.02], [0.03, 0.02, 0.02], 1e-3
+    )
+
+
+def test_projection_keeps_the_normal_part_with_its_sign():
+    dx = np.array([[0.01, 0.02, 0.0], [-0.01, 0.02, 0.0], [0.0, 0.03, 0.0]])
+    normals = np.array([[2.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # not unit; unknown
+    signed = project_onto_normals(dx, normals)
+    # Sliding along the face (y) is dropped; a retreat moves the point back; unknown: unchanged.
+    np.testing.assert_allclose(signed, [[0.01, 0, 0], [-0.01, 0, 0], [0, 0.03, 0]], atol=1e-15)
+    pushes = project_onto_normals(dx, normals, signed=False)
+    np.testing.assert_allclose(pushes, [[0.01, 0, 0], [0, 0, 0], [0, 0.03, 0]], atol=1e-15)
+    with pytest.raises(ValueError, match="normals"):
+        project_onto_normals(dx, normals[:2])
+
+
+def test_normals_point_out_of_the_robot_in_the_world_frame(box_robot):
+    """The robot is turned 90 degrees about z: its +x face (in E) faces world +y."""
+    rotation = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    position = np.array([0.5, -0.2, 0.1])
+    local = np.array([[0.02, 0.003, 0.002], [0.005, -0.01, -0.004]])  # +x face, -y face in E
+    points = position + local @ rotation.T
+    normals = robot_surface_normals(box_robot, points, position, rotation)
+    np.testing.assert_allclose(normals, [[0, 1, 0], [1, 0, 0]], atol=1e-9)
+    # Outside the grid the gradient is unknown: a zero row.
+    far = robot_surface_normals(box_robot, position + np.array([1.0, 0.0, 0.0]), position, rotation)
+    np.testing.assert_array_equal(far, 0.0)
+
+
+def test_contact_motion_models(box_robot):
+    """Pushing diagonally on the robot's +x face moves the point by the push's x part only."""
+    points = np.array([[0.02, 0.0, 0.0]])
+    dx = np.array([[0.01, 0.02, 0.005]])
+    np.testing.assert_array_equal(contact_motion("ee", dx), dx)
+    normal = contact_motion("normal", dx, points, box_robot, np.zeros(3))
+    np.testing.assert_allclose(normal, [[0.01, 0.0, 0.0]], atol=1e-9)
+    with pytest.raises(ValueError, match="needs"):
+        contact_motion("normal", dx)
+    with pytest.raises(ValueError, match="model"):
+        contact_motion("tangent", dx)
+
+
+def test_replay_moves_points_by_the_chosen_model():
+    """On a synthetic episode (a disc pushing boxes): "ee" is the default; "normal" keeps each
+    contact's motion along the disc's radius, which is all of a firm push's motion."""
+    log = synthetic_episode("SYN2", 0)
+    penetration = log_penetration(log)
+    normal = observed_dx(log, "normal", penetration)
+    np.testing.assert_array_equal(observed_dx(log, "ee", None), log.contact_dx)
+    steps = np.repeat(np.arange(log.n_actions), np.diff(log.contact_offsets))
+    radial = log.contact_points[:, :2] - log.ee_position[steps, :2]
+    # The projected motion is along the radius (within the 1 mm grid's gradient error, 1.4
+    # degrees here) and no longer than the EE's.
+    cross = radial[:, 0] * normal[:, 1] - radial[:, 1] * normal[:, 0]
+    sine = cross / np.linalg.norm(radial, axis=1) / np.linalg.norm(normal[:, :2], axis=1)
+    assert np.degrees(np.abs(np.arcsin(sine))).max() < 2.0
+    assert np.all(np.linalg.norm(normal, axis=1) <= np.linalg.norm(log.contact_dx, axis=1) + 1e-12)
+    assert replay(log, "dbscan") == {**replay(log, "dbscan", dx_model="ee"), "wall_time_s": ANY}
+    row = replay(log, "stucco", dx_model="normal")
+    assert row["n_contacts"] == log.n_contacts and row["ce_cm"] < 0.1
+    with pytest.raises(ValueError, match="dx_model"):
+        replay(log, "stucco", dx_model="tangent")
