@@ -271,6 +271,7 @@ def build_bor_diagram(
     tracker_params=None,
     threshold: float | None = None,
     estimator_gain: float = 50.0,
+    dx_model: str = "ee",
     external_actions: bool = False,
 ) -> BorDiagram:
     """Builds the BOR Diagram of ``scene`` (a SceneFile or a scene name) with ``method``.
@@ -285,6 +286,8 @@ def build_bor_diagram(
         threshold: detection threshold on the chi-square statistic (default
             :func:`~stucco_drake.systems.contact_detector.default_threshold`).
         estimator_gain: the momentum observer's bandwidth K_O (1/s).
+        dx_model: how the tracker moves contact points, ``"ee"`` (paper) or ``"normal"``
+            (see :class:`~stucco_drake.systems.soft_tracking_filter.SoftTrackingFilter`).
         external_actions: export a ``planar_step`` input, (dx, dy) in m (world), read at the
             start of each action, instead of playing ``scene.actions`` (closed-loop policies).
     """
@@ -365,7 +368,8 @@ def build_bor_diagram(
     builder.Connect(truth.GetOutputPort("truth_contacts"), assembler.GetInputPort("truth_contacts"))
 
     tracker = make_tracker(method, tracker_params, penetration)
-    tracking = builder.AddNamedSystem("soft_tracking", SoftTrackingFilter(tracker, tracker_seed, h))
+    tracking = builder.AddNamedSystem("soft_tracking", SoftTrackingFilter(
+        tracker, tracker_seed, h, dx_model=dx_model, robot_sdf=penetration.robot_sdf))
     for name in ("ee_pose", "action_contacts"):
         builder.Connect(assembler.GetOutputPort(name), tracking.GetInputPort(name))
     target = builder.AddNamedSystem(

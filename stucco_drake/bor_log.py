@@ -236,8 +236,9 @@ def grasp_from_log(log: EpisodeLog, tracker):
     """Grasp the target where the tracker's points say it is, from the logged final state.
 
     The target's pose is estimated as the BOR Diagram does
-    (:func:`~stucco_drake.core.target_pose.estimate_target_pose` with 30 restarts, the gripper's
-    pxpen at every logged end-effector position), with a generator seeded by
+    (:func:`~stucco_drake.core.target_pose.estimate_target_pose` with 30 restarts and the
+    gripper's pxpen at the logged end-effector positions since the chosen segment was last
+    touched, ``penetration_configs="since_touch"``), with a generator seeded by
     ``[log.seed, 1]``; the grasp then runs in a freshly built grasp scene set to the logged
     plant state (:func:`~stucco_drake.grasp.execute_grasp`). Returns the
     :class:`~stucco_drake.grasp.GraspResult`, or None when no segment can be fitted (no grasp
@@ -249,7 +250,8 @@ def grasp_from_log(log: EpisodeLog, tracker):
     try:
         estimate = estimate_target_pose(
             np.random.default_rng([log.seed, 1]), points, labels, shape, log_penetration(log),
-            log.ee_position, log.ee_rotation[-1],
+            log.ee_position, log.ee_rotation[-1], penetration_configs="since_touch",
+            point_steps=np.repeat(np.arange(log.n_actions), np.diff(log.contact_offsets)),
         )  # fmt: skip
     except ValueError:
         return None

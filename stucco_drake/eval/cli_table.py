@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from stucco_drake.core.baselines import TRACKER_NAMES
+from stucco_drake.core.contact_motion import DX_MODELS
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.replay import replay
 from stucco_drake.eval.results import RunResults, row_key
@@ -63,13 +64,16 @@ def load_cached_log(out, scene: str, seed: int) -> EpisodeLog:
     return log
 
 
-def replay_cached(task: tuple[str, int, str], out: str, sources: Sources) -> dict:
+def replay_cached(task: tuple[str, int, str], out: str, sources: Sources,
+                  dx_model: str = "ee") -> dict:
     """One run (scene, seed, method) replayed from its cached log, with the scene source's
-    pxpen and grasp (runs in a worker)."""
+    pxpen and grasp and contact motion ``dx_model`` (runs in a worker)."""
     scene, seed, method = task
     log, source = load_cached_log(out, scene, seed), sources[scene]
-    return replay(log, method, penetration=source.penetration_for(log, method),
-                  grasp=source.grasp)
+    penetration = source.penetration_for(log, method)
+    if dx_model != "ee" and penetration is None and source.penetration is not None:
+        penetration = source.penetration(log)  # the normals come from the robot's geometry
+    return replay(log, method, penetration=penetration, grasp=source.grasp, dx_model=dx_model)
 
 
 def simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
@@ -107,18 +111,22 @@ def make_table(
     executor: cf.Executor,
     progress=None,
     sources: Sources = SYNTHETIC_SOURCES,
+    dx_model: str = "ee",
 ) -> list[dict]:
     """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
 
-    ``sources`` maps each scene name to its :class:`EpisodeSource`. Returns the table's rows
-    (from ``OUT/runs.csv``, including runs of earlier calls).
+    ``sources`` maps each scene name to its :class:`EpisodeSource`; ``dx_model`` is how every
+    method moves contact points (see :func:`~stucco_drake.eval.replay.replay`; keep one per
+    OUT folder: rows are keyed by scene, seed and method only). Returns the table's rows (from
+    ``OUT/runs.csv``, including runs of earlier calls).
     """
     check_names(scenes, methods, sources)
     if runs < 1:
         raise ValueError(f"runs must be positive, got {runs}")
     out = Path(out)
     results = RunResults(out / "runs.csv")
-    replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources))
+    replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources),
+                                    dx_model=dx_model)
     wanted = {(scene, seed, method) for seed in range(runs) for scene in scenes
               for method in methods}  # fmt: skip
 
@@ -151,6 +159,9 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES) -> None:
     table.add_argument("--methods", nargs="+", default=list(TRACKER_NAMES),
                        help=f"tracking methods (default: {' '.join(TRACKER_NAMES)})")
     table.add_argument("--out", required=True, help="output folder (logs, runs.csv, table)")
+    table.add_argument("--dx-model", choices=DX_MODELS, default="ee",
+                       help="how contact points move: the end effector's displacement in "
+                            "contact (ee, the paper) or its part along the contact normal")
     table.add_argument("--workers", type=int, default=None,
                        help="parallel workers (default: one per CPU)")
     table.add_argument("--executor", choices=("process", "dask"), default="process",
@@ -173,7 +184,7 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
     try:
         with executor:
             rows = make_table(args.scenes, args.methods, args.runs, args.out, executor,
-                              sources=sources)
+                              sources=sources, dx_model=args.dx_model)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1

@@ -10,6 +10,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
 
+from stucco_drake.core.contact_motion import DX_MODELS, contact_motion
 from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.tracker import Tracker
 
@@ -61,14 +62,25 @@ class SoftTrackingFilter(LeafSystem):
             holds a deep copy of it, so one instance can build several diagrams.
         seed: seed of the numpy Generator every draw of the tracker comes from.
         check_period: how often (s) to look for a newly completed action.
+        dx_model: how far each contact point moves (see
+            :func:`~stucco_drake.core.contact_motion.contact_motion`): ``"ee"`` the end
+            effector's displacement in contact (paper), ``"normal"`` its part along the robot's
+            outward surface normal at the contact, which needs ``robot_sdf``.
+        robot_sdf: the robot's signed distance in the end-effector frame (for ``"normal"``).
     """
 
-    def __init__(self, tracker: Tracker, seed: int, check_period: float):
+    def __init__(self, tracker: Tracker, seed: int, check_period: float, *,
+                 dx_model: str = "ee", robot_sdf=None):
         super().__init__()
         if not isinstance(tracker, Tracker):
             raise ValueError(f"tracker: {type(tracker).__name__} is not a contact Tracker")
         if not check_period > 0:
             raise ValueError(f"check_period: must be > 0 s, got {check_period!r}")
+        if dx_model not in DX_MODELS:
+            raise ValueError(f"dx_model: expected one of {DX_MODELS}, got {dx_model!r}")
+        if dx_model == "normal" and robot_sdf is None:
+            raise ValueError("dx_model 'normal' needs robot_sdf")
+        self.dx_model, self._robot_sdf = dx_model, robot_sdf
         self._ee_pose = self.DeclareAbstractInputPort(
             "ee_pose", AbstractValue.Make(RigidTransform())
         )
@@ -101,11 +113,15 @@ class SoftTrackingFilter(LeafSystem):
             return
         updated = copy.deepcopy(current)
         pose = self._ee_pose.Eval(context)
+        dx = contacts.dx
+        if len(contacts.points):
+            dx = contact_motion(self.dx_model, contacts.dx, contacts.points, self._robot_sdf,
+                                pose.translation(), pose.rotation().matrix())
         updated.tracker.update(
             updated.rng,
             pose.translation(),
             contacts.points,
-            contacts.dx,
+            dx,
             pose.rotation().matrix(),
         )
         updated.last_action = contacts

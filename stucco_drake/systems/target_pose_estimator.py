@@ -22,6 +22,10 @@ class EstimatorState:
 
     rng: np.random.Generator
     config_positions: np.ndarray  # (k, 3) EE origins at the end of each action (m, world)
+    # (n,) index into config_positions of the action that sensed each tracked point, in the
+    # trackers' contact order.
+    point_steps: np.ndarray = dataclasses.field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64))
     last_action_index: int = -1
     estimate: TargetPoseEstimate | None = None
 
@@ -54,6 +58,12 @@ class TargetPoseEstimator(LeafSystem):
         penetration: the robot's pxpen for the selection rule.
         seed: seed of the generator for the ICP restarts.
         check_period: how often (s) to look for a newly completed action.
+        n_restarts: ICP restarts per segment.
+        penetration_configs: which visited configs a restart may not penetrate (see
+            :func:`~stucco_drake.core.target_pose.estimate_target_pose`): ``"since_touch"``
+            (default; those since the chosen segment was last touched, because the target
+            may have been pushed since the older ones), ``"all"`` (the authors' code) or
+            ``"latest"`` (the paper's text).
     """
 
     def __init__(
@@ -63,6 +73,7 @@ class TargetPoseEstimator(LeafSystem):
         seed: int,
         check_period: float,
         n_restarts: int = 30,
+        penetration_configs: str | int = "since_touch",
     ):
         super().__init__()
         if not check_period > 0:
@@ -70,6 +81,7 @@ class TargetPoseEstimator(LeafSystem):
         self.target_shape = target_shape
         self.penetration = penetration
         self.n_restarts = int(n_restarts)
+        self.penetration_configs = penetration_configs
         self._ee_pose = self.DeclareAbstractInputPort(
             "ee_pose", AbstractValue.Make(RigidTransform())
         )
@@ -104,6 +116,9 @@ class TargetPoseEstimator(LeafSystem):
         updated.last_action_index = contacts.action_index
         position = self._ee_pose.Eval(context).translation()
         updated.config_positions = np.vstack([current.config_positions, position])
+        step = len(updated.config_positions) - 1
+        updated.point_steps = np.concatenate(
+            [current.point_steps, np.full(len(contacts.points), step, dtype=np.int64)])
         points = self._points.Eval(context)
         labels = np.asarray(self._labels.Eval(context))
         enough = len(labels) and np.bincount(labels[labels >= 0]).max(initial=0) >= 3
@@ -119,6 +134,8 @@ class TargetPoseEstimator(LeafSystem):
                 self._ee_pose.Eval(context).rotation().matrix(),
                 n_restarts=self.n_restarts,
                 initial_pose=None if previous is None else previous.pose,
+                penetration_configs=self.penetration_configs,
+                point_steps=updated.point_steps,
             )
         state.get_mutable_abstract_state(int(self._state)).set_value(updated)
 
