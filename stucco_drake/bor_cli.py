@@ -22,6 +22,7 @@ DIAGRAM_DEPTH = 1
 def add_run_command(subparsers) -> None:
     """Adds ``run`` to the CLI's subparsers."""
     from stucco_drake.core.baselines import TRACKER_NAMES
+    from stucco_drake.core.contact_motion import DX_MODELS
 
     run = subparsers.add_parser("run", help="rummage a scene blind, track contacts, estimate "
                                             "the target's pose; print GS, CE, FMI")  # fmt: skip
@@ -31,6 +32,9 @@ def add_run_command(subparsers) -> None:
     run.add_argument("--seed", type=int, default=0, help="seed of every random stream")
     run.add_argument("--actions", type=int, default=None,
                      help="play only the first N actions (default: all)")
+    run.add_argument("--dx-model", choices=DX_MODELS, default="ee",
+                     help="how tracked contacts move: the end effector's displacement in "
+                          "contact (ee, the paper) or its part along the contact normal")
     run.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
     run.add_argument("--record", metavar="OUT.html",
                      help="save a standalone Meshcat HTML recording of the run")
@@ -64,7 +68,7 @@ def run_bor(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)  # a bad scene file is reported by the CLI's main
     meshcat = start_meshcat(args.meshcat, args.record)
     result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
-                         grasp=_grasp_hook(not args.no_grasp))  # fmt: skip
+                         grasp=_grasp_hook(not args.no_grasp), dx_model=args.dx_model)
     print(result.summary())
     if args.record:
         save_recording(meshcat, args.record)

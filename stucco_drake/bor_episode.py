@@ -152,6 +152,7 @@ def run_episode(
     meshcat=None,
     grasp: GraspHook | None = None,
     on_action: Callable[[int, object], None] | None = None,
+    dx_model: str = "ee",
 ) -> EpisodeResult:
     """Plays the first ``n_actions`` actions of ``scene`` (all by default) through the BOR
     Diagram (``bor``, or one built for ``method`` and ``seed``), then scores the tracking.
@@ -159,10 +160,12 @@ def run_episode(
     given, e.g. to clone its context midway.
 
     ``on_action(k, action_contacts)`` is called after each action's contacts are formed;
-    ``grasp`` (see :data:`GraspHook`) after the last action's pose estimate.
+    ``grasp`` (see :data:`GraspHook`) after the last action's pose estimate. ``dx_model``
+    (``"ee"``, the paper, or ``"normal"``) is how the tracker moves contact points, when the
+    Diagram is built here.
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
-    bor = bor or build_bor_diagram(scene, method, seed, meshcat=meshcat)
+    bor = bor or build_bor_diagram(scene, method, seed, meshcat=meshcat, dx_model=dx_model)
     total = len(scene.actions)
     n_actions = total if n_actions is None else min(int(n_actions), total)
     if simulator is None:

@@ -38,6 +38,8 @@ from stucco_drake.systems.contact_isolator import sample_gripper_surface
 
 #: Half-width (m) of the uniform noise added to every action axis (paper Sec. V).
 ACTION_NOISE = 5e-4
+#: Fewest points of a segment for a pose fit (three pin a planar pose).
+MIN_SEGMENT_POINTS = 3
 #: Spacing (m) of the gripper surface samples for the robot-object distance (ambiguity).
 _DISTANCE_SPACING = 0.006
 
@@ -246,15 +248,15 @@ def grasp_from_log(log: EpisodeLog, tracker):
     """
     built = _grasp_scene(log.scene)
     shape = target_shape(built)
-    points, labels = tracker.map_points(), tracker.segment()
-    try:
-        estimate = estimate_target_pose(
-            np.random.default_rng([log.seed, 1]), points, labels, shape, log_penetration(log),
-            log.ee_position, log.ee_rotation[-1], penetration_configs="since_touch",
-            point_steps=np.repeat(np.arange(log.n_actions), np.diff(log.contact_offsets)),
-        )  # fmt: skip
-    except ValueError:
+    points, labels = tracker.map_points(), np.asarray(tracker.segment())
+    if np.bincount(labels[labels >= 0], minlength=1).max() < MIN_SEGMENT_POINTS:
         return None
+    estimate = estimate_target_pose(
+        np.random.default_rng([log.seed, 1]), points, labels, shape, log_penetration(log),
+        log.ee_position, log.ee_rotation[-1], min_points=MIN_SEGMENT_POINTS,
+        penetration_configs="since_touch",
+        point_steps=np.repeat(np.arange(log.n_actions), np.diff(log.contact_offsets)),
+    )  # fmt: skip
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     context.SetTime(float(log.info.get("final_time_s", 0.0)))

@@ -75,14 +75,17 @@ def test_every_method_replays_a_drake_log(fb_log):
 
 
 class _TrueOutline:
-    """A tracker stand-in whose points lie on the target's final outline (one segment)."""
+    """A tracker stand-in holding the log's contacts, moved onto the target's final outline
+    (one segment), in the log's order (the grasp's pose estimate needs when each was sensed)."""
 
     def __init__(self, log: EpisodeLog, offset=(0.0, 0.0)):
         x, y, yaw = log.object_poses[-1, 0]
         hx, hy = log.object_shapes[0, 1:3]
         # Two adjacent faces (an L pins the pose), in the target's frame.
-        local = [(-hx, v) for v in np.linspace(-hy, hy, 9)]
-        local += [(u, -hy) for u in np.linspace(-hx, hx, 5)[1:]]
+        n = log.n_contacts
+        short = max(1, n // 3)
+        local = [(-hx, v) for v in np.linspace(-hy, hy, n - short)]
+        local += [(u, -hy) for u in np.linspace(-hx, hx, short + 1)[1:]]
         c, s = math.cos(yaw), math.sin(yaw)
         self._points = np.array([
             (x + offset[0] + c * u - s * v, y + offset[1] + s * u + c * v, 0.1) for u, v in local
@@ -96,6 +99,7 @@ class _TrueOutline:
 
 
 def test_grasp_from_log_lifts_the_target_at_its_outline(fb_log):
+    assert fb_log.n_contacts >= 4
     result = grasp_from_log(fb_log, _TrueOutline(fb_log))
     assert result is not None and result.success, result
     assert result.lift_height >= 0.05
