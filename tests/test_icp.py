@@ -12,11 +12,8 @@ from stucco_drake.core.icp import (
     sample_outline,
     transform,
 )
-from stucco_drake.core.target_pose import (
-    estimate_target_pose,
-    penetration_window,
-    restart_penetration,
-)
+from stucco_drake.core.pose_penetration import penetration_window, restart_penetration
+from stucco_drake.core.target_pose import estimate_target_pose
 
 #: The paper's cracker box (half extents, m) and a 1.2x tomato can (radius, m).
 BOX = BoxSdf((0.0308, 0.0788, 0.1035))
