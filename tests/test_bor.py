@@ -159,3 +159,15 @@ def test_committed_diagram_source_matches_the_code():
         "the BOR Diagram's wiring changed: regenerate with `stucco-drake diagram --scene FB "
         "--out diagrams/bor.svg` and commit diagrams/bor.dot (and the .svg)"
     )
+
+
+def test_run_command_prints_one_result_line(capsys, tmp_path):
+    from stucco_drake.cli import main
+
+    plot = tmp_path / "fb.png"
+    code = main(["run", "--scene", "FB", "--actions", "4", "--no-grasp", "--dx-model", "normal",
+                 "--plot", str(plot)])
+    lines = capsys.readouterr().out.splitlines()
+    assert code == 0
+    assert lines[0].startswith("FB stucco seed 0: GS n/a, CE ") and "in 4 actions" in lines[0]
+    assert plot.stat().st_size > 10_000
