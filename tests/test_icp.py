@@ -240,18 +240,23 @@ def test_shape_rule_keeps_a_genuine_target_and_falls_back_when_all_fail():
     assert shape.segment == paper.segment and np.array_equal(shape.pose, paper.pose)
 
 
+def _one_long_side():
+    """(truth pose, 20 noisy contacts on one long side of BOX, hx, their positions along it)."""
+    rng = np.random.default_rng(31)
+    truth = np.array([-0.1, 0.25, 2.0])
+    hx, hy = BOX.half_extents[:2]
+    along = np.linspace(-hy, hy, 20)
+    face = transform(truth[None], np.column_stack([np.full(20, hx), along]))[0]
+    return truth, lift(face + rng.normal(0, NOISE, face.shape)), hx, along
+
+
 def test_penetration_picks_the_side_the_robot_was_not_on(disc_penetration):
     """One long side touched from outside: the box fits on either side of the points.
 
     The end effector (a 2 cm disc) slid along the outside of the face, so every pose with the
     box on the robot's side penetrates it and the least-penetration rule rejects it.
     """
-    rng = np.random.default_rng(31)
-    truth = np.array([-0.1, 0.25, 2.0])
-    hx, hy = BOX.half_extents[:2]
-    along = np.linspace(-hy, hy, 20)
-    face = transform(truth[None], np.column_stack([np.full(20, hx), along]))[0]
-    points = lift(face + rng.normal(0, NOISE, face.shape))
+    truth, points, hx, along = _one_long_side()
     configs = lift(transform(truth[None], np.column_stack([np.full(20, hx + 0.021), along]))[0])
     labels = np.zeros(20, dtype=int)
     estimate = estimate_target_pose(
@@ -278,12 +283,7 @@ def test_since_touch_ignores_configs_from_before_the_target_was_pushed(disc_pene
     """The robot first swept the area where the box now lies (the box was pushed there later),
     then slid along its face. Every config counted, the true pose penetrates the early sweep
     and loses; counting only the configs since the segment was last touched, it wins."""
-    rng = np.random.default_rng(31)
-    truth = np.array([-0.1, 0.25, 2.0])
-    hx, hy = BOX.half_extents[:2]
-    along = np.linspace(-hy, hy, 20)
-    face = transform(truth[None], np.column_stack([np.full(20, hx), along]))[0]
-    points = lift(face + rng.normal(0, NOISE, face.shape))
+    truth, points, hx, along = _one_long_side()
     inside = np.stack(np.meshgrid([-0.015, 0.0, 0.015], np.linspace(-0.06, 0.06, 13)), -1)
     sweep = transform(truth[None], inside.reshape(-1, 2))[0]
     slide = transform(truth[None], np.column_stack([np.full(20, hx + 0.021), along]))[0]
