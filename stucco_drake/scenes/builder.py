@@ -295,6 +295,7 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
         q_nominal=q_arm, hold_positions=hold, start_xy=start.xy,
         period=control.ik_period, action_duration=scene.action_duration,
         move_fraction=control.move_fraction, gain=control.ik_gain, max_step=control.max_step,
+        max_push_force=control.max_push_force, joint_kp=control.kp,
     ))
     builder.Connect(select_state.get_output_port(), ctrl.GetInputPort("robot_state"))
     desired = ctrl.GetOutputPort("desired_state")

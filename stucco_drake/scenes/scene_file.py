@@ -92,6 +92,8 @@ class ControlParams:
         ik_gain: pose-error feedback gain of the differential IK (1/s).
         move_fraction: fraction of each action's duration spent moving; the rest settles.
         max_step: per-axis clip of a planar step (m), the paper's 0.03.
+        max_push_force: cap on the gripper's planar push (N), None for none; the paper's
+            gripper was moved by a constraint of at most 30 N.
         nominal_q: a preferred arm posture (rad); turned about joint 1 to face the gripper's
             start, it seeds the start IK. The IK's null-space pull then holds the arm near its
             start posture.
@@ -104,6 +106,7 @@ class ControlParams:
     ik_gain: float = 20.0
     move_fraction: float = 0.7
     max_step: float = 0.03
+    max_push_force: float | None = None
     nominal_q: list[float] = dataclasses.field(
         # The IK solution with the gripper at the middle of the BOR scenes, from the
         # default base pose: a posture with the elbow up and well inside the joint limits.
@@ -259,6 +262,8 @@ def _check(scene: SceneFile) -> None:
     c = scene.control
     need(0 < c.move_fraction <= 1, "control.move_fraction", "must lie in (0, 1]")
     need(c.max_step > 0, "control.max_step", "must be > 0")
+    need(c.max_push_force is None or c.max_push_force > 0, "control.max_push_force",
+         "must be > 0 (or omitted)")
     need(c.ik_period >= scene.plant.time_step, "control.ik_period", "must be >= plant.time_step")
     need(len(c.nominal_q) == 7, "control.nominal_q", "expected 7 joint angles")
     for i, p in enumerate(scene.primitives):

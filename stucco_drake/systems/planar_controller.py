@@ -128,12 +128,19 @@ class PlanarEndEffectorController(LeafSystem):
 
     Discrete state: [q_cmd (7), v_cmd (7), start_xy (2), goal_xy (2), tick (1)], updated every
     ``period`` seconds. An action lasts ``ticks_per_action`` updates.
+
+    ``max_push_force`` (N, None for no limit) caps how hard the gripper pushes in x-y, as the
+    paper's floating gripper was moved by a constraint of at most 30 N: whenever the joint
+    controller (inverse dynamics, position gain ``joint_kp`` in 1/s^2) pushes harder than that
+    along the reference's lead, the reference is pulled back towards the measured gripper
+    position, so a gripper blocked by a heavy object stops instead of toppling it.
     """
 
     def __init__(self, robot_plant, arm_instance, gripper_frame, *, height: float, yaw: float,
                  q_start, q_nominal, hold_positions, start_xy, period: float,
                  action_duration: float, move_fraction: float = 0.7, gain: float = 20.0,
-                 max_step: float = 0.03):
+                 max_step: float = 0.03, max_push_force: float | None = None,
+                 joint_kp: float | None = None):
         super().__init__()
         self._kin = ArmKinematics(robot_plant, arm_instance, gripper_frame)
         n_arm = len(self._kin.q_index)
@@ -147,6 +154,10 @@ class PlanarEndEffectorController(LeafSystem):
         if abs(self._ticks * period - action_duration) > 1e-9 or self._ticks < 1:
             raise ValueError("action_duration must be a whole number of controller periods")
         self._move_time = move_fraction * action_duration
+        if max_push_force is not None and (max_push_force <= 0 or not joint_kp or joint_kp <= 0):
+            raise ValueError("max_push_force needs a positive force and a positive joint_kp")
+        self._max_push_force = max_push_force
+        self._joint_kp = joint_kp
         self.DeclareVectorInputPort("robot_state", self._nq + self._nv)
         self.DeclareVectorInputPort("planar_step", 2)
         x0 = np.concatenate([q_start, np.zeros(n_arm), start_xy, start_xy, [0.0]])
@@ -179,6 +190,8 @@ class PlanarEndEffectorController(LeafSystem):
         s_dot = 1.0 / self._move_time
         value, slope = _min_jerk((phase + 1) * self._period * s_dot)
         xy_ref, v_ref = start + value * (goal - start), slope * s_dot * (goal - start)
+        if self._max_push_force is not None:
+            xy_ref, v_ref = self._limit_push(context, q, xy_ref, v_ref)
         X_des = RigidTransform(self._R, [xy_ref[0], xy_ref[1], self._height])
         q_full = self._hold.copy()
         q_full[self._kin.q_index] = q
@@ -192,6 +205,39 @@ class PlanarEndEffectorController(LeafSystem):
         discrete_state.set_value(
             self._state, np.concatenate([q_next, v, start, goal, [tick + 1]])
         )
+
+    def _limit_push(self, context, q_cmd, xy_ref, v_ref):
+        """The reference pulled back so that the joint controller pushes with at most
+        ``max_push_force`` along the reference's lead over the measured gripper position.
+
+        The push is the planar force J^+T M kp (q_cmd - q) of the joint controller's position
+        term (it balances the contact force once the gripper is blocked). When it exceeds the
+        cap, the lead is scaled down by cap / push from the commanded pose's current lead, so
+        a blocked gripper presses with about the cap instead of toppling what blocks it.
+        """
+        x_meas = self.get_input_port(0).Eval(context)
+        kin = self._kin
+        kin.set_positions(x_meas[:self._nq])
+        xy_meas = kin.pose().translation()[:2].copy()
+        lead = xy_ref - xy_meas
+        norm = float(np.linalg.norm(lead))
+        if norm < 1e-9:
+            return xy_ref, v_ref
+        unit = lead / norm
+        J = kin.jacobian()
+        M = kin.plant.CalcMassMatrix(kin.context)[np.ix_(kin.v_index, kin.v_index)]
+        tau = self._joint_kp * M @ (q_cmd - x_meas[kin.q_index])
+        push = float(unit @ (np.linalg.pinv(J).T @ tau)[3:5])
+        q_full = x_meas[:self._nq].copy()
+        q_full[kin.q_index] = q_cmd
+        kin.set_positions(q_full)
+        commanded_lead = float(unit @ (kin.pose().translation()[:2] - xy_meas))
+        if push <= 0.0 or commanded_lead <= 0.0:
+            return xy_ref, v_ref
+        allowed = commanded_lead * self._max_push_force / push
+        if norm <= allowed:
+            return xy_ref, v_ref
+        return xy_meas + unit * allowed, np.zeros(2)
 
     def _calc_desired(self, context, output: BasicVector):
         q, v, _, _, _ = self._split(context.get_discrete_state(self._state).value())
