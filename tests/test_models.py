@@ -72,6 +72,10 @@ _YCB_VARIANTS = {  # file stem: (base, scale, mass set by the paper or None)
     "005_tomato_soup_can_x2": ("005_tomato_soup_can", 2.0, None),
     "002_master_chef_can_x2": ("002_master_chef_can", 2.0, None),
     "010_potted_meat_can_x1_5": ("010_potted_meat_can", 1.5, None),
+    # The paper's simulator scaled geometry, not mass: the retrieval scenes' light clutter.
+    "005_tomato_soup_can_x2_light": ("005_tomato_soup_can", 2.0, 0.349),
+    "002_master_chef_can_x2_light": ("002_master_chef_can", 2.0, 0.414),
+    "010_potted_meat_can_x1_5_light": ("010_potted_meat_can", 1.5, 0.37),
 }
 YCB_EXPECTED = dict(_YCB_BASE)
 for _stem, (_base, _s, _mass) in _YCB_VARIANTS.items():
