@@ -230,6 +230,8 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     The target's true pose comes from the plant (model ``scene.target``). A cylinder can be
     grasped at any yaw: ``cylinder_yaw`` (rad, world; default the gripper's current yaw) picks
     one, e.g. so the open fingers (0.2 m across, plates included) miss known clutter.
+    A target that is not between the fingers once they have closed fails there: the lift and
+    hold are not simulated (``sim_time`` is then shorter).
     """
     built, simulator = _grasp_context(built, simulator)
     diagram, plant = built.diagram, built.plant
@@ -255,17 +257,26 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
         target.EvalPoseInWorld(plant_context),
         built.gripper_frame().CalcPoseInWorld(plant_context), target_shape)
 
-    simulator.AdvanceTo(t0 + executor.total_duration)
+    # A target that is not between the closed fingers cannot be lifted by them: the grasp has
+    # failed, and the lift and hold (the costliest part to simulate, squeezing) are skipped.
+    closed_on = between_fingers(built.gripper_frame().CalcPoseInWorld(plant_context),
+                                target.EvalPoseInWorld(plant_context).translation(),
+                                _finger_positions(built, plant_context))
+    if closed_on:
+        simulator.AdvanceTo(t0 + executor.total_duration)
     plant_context = plant.GetMyContextFromRoot(context)
     X_WO = target.EvalPoseInWorld(plant_context)
     X_WG = built.gripper_frame().CalcPoseInWorld(plant_context)
     lift = float(X_WO.translation()[2] - z_before)
-    held = between_fingers(X_WG, X_WO.translation(), _finger_positions(built, plant_context))
+    held = closed_on and between_fingers(X_WG, X_WO.translation(),
+                                         _finger_positions(built, plant_context))
     success = lift >= min_lift and held
     reasons = []
     if lift < min_lift:
         reasons.append(f"lifted {lift:.3f} m < {min_lift:.3f} m")
-    if not held:
+    if not closed_on:
+        reasons.append("target not between the fingers after closing (no lift attempted)")
+    elif not held:
         reasons.append("target not between the fingers")
     reason = "ok" if success else "; ".join(reasons)
     return GraspResult(
