@@ -45,6 +45,10 @@ class _AssemblerState:
     ee_pose: RigidTransform = dataclasses.field(default_factory=RigidTransform)
     detected_without_point: int = 0  # actions in contact whose contact was never isolated
 
+    def __deepcopy__(self, memo):
+        # Immutable (each update builds a new one), so Drake's clone at every step may share it.
+        return self
+
 
 class ActionContactsAssembler(LeafSystem):
     """Latches the isolator's contact point(s) during each action; emits them when it ends.

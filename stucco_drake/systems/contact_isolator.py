@@ -248,6 +248,10 @@ class _IsolatorState:
     wrench_sum: np.ndarray | None = None
     wrench_count: int = 0
 
+    def __deepcopy__(self, memo):
+        # Immutable (each update builds a new one), so Drake's clone at every step may share it.
+        return self
+
 
 class ContactIsolator(LeafSystem):
     """Contact point(s) in world for each detected contact step: bubbles first, else the CPF.

@@ -19,8 +19,11 @@ from stucco_drake.core.tracker import Tracker
 class TrackingState:
     """The filter's abstract state: the belief, its random stream and the action it last saw.
 
-    Drake clones abstract state with ``copy.deepcopy``: a cloned context carries a copy of the
-    belief and of the generator's position, so re-running it gives identical results.
+    Copy on write: Drake clones abstract state (``copy.deepcopy``) at every unrestricted
+    update, i.e. at every check, although the belief changes once per action; the clone
+    therefore shares the tracker and generator, and :meth:`fork` (real copies) is taken
+    before anything is changed. A state in the context is never modified in place, so a
+    cloned context still re-runs to identical results.
     """
 
     tracker: Tracker
@@ -29,9 +32,13 @@ class TrackingState:
     n_updates: int = 0
 
     def __deepcopy__(self, memo):
+        return copy.copy(self)
+
+    def fork(self) -> TrackingState:
+        """A copy owning its own tracker and generator, safe to update."""
         return TrackingState(
-            copy.deepcopy(self.tracker, memo),
-            copy.deepcopy(self.rng, memo),
+            copy.deepcopy(self.tracker),
+            copy.deepcopy(self.rng),
             self.last_action,  # immutable
             self.n_updates,
         )
@@ -111,7 +118,7 @@ class SoftTrackingFilter(LeafSystem):
         current = self.tracking_state(context)
         if contacts.action_index == current.last_action.action_index:
             return
-        updated = copy.deepcopy(current)
+        updated = current.fork()
         pose = self._ee_pose.Eval(context)
         dx = contacts.dx
         if len(contacts.points):

@@ -18,7 +18,11 @@ from stucco_drake.core.target_pose import TargetPoseEstimate, estimate_target_po
 
 @dataclasses.dataclass
 class EstimatorState:
-    """Abstract state: the configs visited, the latest estimate and the random stream."""
+    """Abstract state: the configs visited, the latest estimate and the random stream.
+
+    Copy on write, as :class:`~stucco_drake.systems.soft_tracking_filter.TrackingState`:
+    Drake's per-check clones share everything; :meth:`fork` copies before an update.
+    """
 
     rng: np.random.Generator
     config_positions: np.ndarray  # (k, 3) EE origins at the end of each action (m, world)
@@ -28,6 +32,15 @@ class EstimatorState:
         default_factory=lambda: np.zeros(0, dtype=np.int64))
     last_action_index: int = -1
     estimate: TargetPoseEstimate | None = None
+
+    def __deepcopy__(self, memo):
+        return copy.copy(self)
+
+    def fork(self) -> EstimatorState:
+        """A copy owning its own generator and arrays, safe to update."""
+        return dataclasses.replace(
+            self, rng=copy.deepcopy(self.rng), config_positions=self.config_positions.copy(),
+            point_steps=self.point_steps.copy(), estimate=copy.deepcopy(self.estimate))
 
 
 class TargetPoseEstimator(LeafSystem):
@@ -112,7 +125,7 @@ class TargetPoseEstimator(LeafSystem):
         current = self.estimator_state(context)
         if contacts.action_index == current.last_action_index:
             return
-        updated = copy.deepcopy(current)
+        updated = current.fork()
         updated.last_action_index = contacts.action_index
         position = self._ee_pose.Eval(context).translation()
         updated.config_positions = np.vstack([current.config_positions, position])
