@@ -73,7 +73,12 @@ def test_filter_matches_the_bare_tracker_and_clones_rerun_identically(
     half = len(observations) // 2 * ACTION_PERIOD + ACTION_PERIOD / 2
     simulator.AdvanceTo(half)
     snapshot = context.Clone()
+    snapshot_state = tracking.tracking_state(tracking.GetMyContextFromRoot(snapshot))
+    points_at_half = snapshot_state.tracker.map_points().copy()
     simulator.AdvanceTo(len(observations) * ACTION_PERIOD + ACTION_PERIOD / 2)
+    # The clone shares the belief copy-on-write: the original's updates must not reach it
+    # (read from the tracker itself, not a cached output).
+    np.testing.assert_array_equal(snapshot_state.tracker.map_points(), points_at_half)
     tracking_context = tracking.GetMyContextFromRoot(context)
     points = tracking.GetOutputPort("map_points").Eval(tracking_context)
     labels = tracking.GetOutputPort("segment_labels").Eval(tracking_context)
