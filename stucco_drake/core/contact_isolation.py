@@ -61,8 +61,8 @@ class Isolation:
 
 
 def _cross(a, b) -> np.ndarray:
-    """a x b for broadcastable (..., 3) arrays: np.cross's arithmetic without its per-call
-    overhead (about 50 us, which dominated the CPF's per-step cost)."""
+    """a x b for broadcastable (..., 3) arrays: np.cross's arithmetic (identical results)
+    without its per-call overhead (37 against 13 us for 500 points, called every CPF step)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)

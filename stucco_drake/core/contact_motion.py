@@ -14,9 +14,9 @@ limited the push to the paper's 30 N) the normal model cuts the error of the per
 motion of the target's contact points from 66 to 24 cm (summed, FB seed 0) and STUCCO's mean
 CE from 1.84 to 1.46 cm, but it is worse for light cans that stick to the gripper and are
 carried along (BC, TC: their motion error grows 2-5x), so it is an option, not the paper's
-default. With the 30 N limit the box rocks a few millimetres
-forward under a push and back when released; the signed model follows that (FB seed 0: the
-target contacts' per-action motion errs by 116 mm in sum, against 671 mm for ``"ee"``).
+default. With the 30 N limit the box rocks a few millimetres forward under a push and back
+when released; the signed model follows that (FB seed 0: the target contacts' per-action
+motion errs by 116 mm in sum, against 671 mm for ``"ee"``).
 
 Everything here is pure numpy. Frames: the normals and displacements are in the world frame
 W, distances in metres; the robot's SDF is in the end-effector frame E.
