@@ -49,6 +49,28 @@ def test_normals_point_out_of_the_robot_in_the_world_frame(box_robot):
     np.testing.assert_array_equal(far, 0.0)
 
 
+def test_a_point_bridging_a_gap_gets_the_hull_normal():
+    """Two 2 x 4 x 2 cm fingers 2 cm apart along x (a gap at |x| < 1 cm). A contact isolated
+    in the gap's mouth, on the hull's +y face, is where an object touching both fingers' +y
+    faces has its centre of pressure: its normal is +y. The SDF's own gradient there points
+    at the nearer finger's side instead."""
+    left, right = BoxSdf((0.01, 0.02, 0.01)), BoxSdf((0.01, 0.02, 0.01))
+
+    def fingers(p):
+        return np.minimum(left(p - [-0.02, 0.0, 0.0]), right(p - [0.02, 0.0, 0.0]))
+
+    robot = GridSdf.build(fingers, [-0.04, -0.03, -0.02], [0.04, 0.03, 0.02], 1e-3)
+    mouth = np.array([[0.004, 0.02, 0.0], [-0.004, 0.015, 0.0]])  # on and 5 mm inside the hull
+    hull = robot_surface_normals(robot, mouth, np.zeros(3))
+    np.testing.assert_allclose(hull, [[0, 1, 0], [0, 1, 0]], atol=1e-9)
+    sdf_only = robot_surface_normals(robot, mouth, np.zeros(3), bridge_distance=None)
+    assert np.all(np.abs(sdf_only[:, 0]) > 0.9)  # sideways, at the nearer finger
+    # On a finger's real surface the SDF decides: its +y face, and its inner side face.
+    real = np.array([[0.02, 0.02, 0.0], [0.01, 0.0, 0.0]])
+    np.testing.assert_allclose(robot_surface_normals(robot, real, np.zeros(3)),
+                               [[0, 1, 0], [-1, 0, 0]], atol=1e-9)  # fmt: skip
+
+
 def test_contact_motion_models(box_robot):
     """Pushing diagonally on the robot's +x face moves the point by the push's x part only."""
     points = np.array([[0.02, 0.0, 0.0]])

@@ -60,14 +60,22 @@ def project_onto_normals(dx, normals, *, signed: bool = True) -> np.ndarray:
 
 
 def robot_surface_normals(
-    robot_sdf: GridSdf, points, ee_position, ee_rotation=None, *, planar: bool = True
-) -> np.ndarray:
+    robot_sdf: GridSdf, points, ee_position, ee_rotation=None, *, planar: bool = True,
+    bridge_distance: float | None = 0.002,
+) -> np.ndarray:  # fmt: skip
     """(n, 3) unit outward normals (frame W) of the robot's surface nearest ``points``.
 
     The normal is the gradient of the robot's SDF (frame E) at each contact point, rotated to
     W: it points out of the robot, i.e. into the touched object. With ``planar`` its z part is
     dropped first (the tasks are planar and the bubbles' curvature in z would otherwise tilt
     it). Rows are zero where the gradient vanishes (outside the grid, flat SDF).
+
+    A point more than ``bridge_distance`` (m) outside the robot lies where its convex hull
+    bridges a concavity: a contact isolated there is the centre of pressure of an object
+    touching both sides (see ``ContactIsolator``'s ``hull``), whose surface is the hull's
+    facet there. It gets the normal of the hull facet it lies past farthest (the nearest
+    facet for a point just inside the hull); the SDF's gradient would point sideways, at the
+    nearest side of the gap. None turns this off.
 
     Args:
         robot_sdf: the robot's signed distance in frame E (m).
@@ -79,7 +87,15 @@ def robot_surface_normals(
     rotation = np.eye(3) if ee_rotation is None else np.asarray(ee_rotation, dtype=np.float64)
     # Rows R_WE^T (p - p_WE): the points in E; gradients come back as rows in E, g_W = R g_E.
     local = (points - np.asarray(ee_position, dtype=np.float64)) @ rotation
-    gradient = robot_sdf.gradient(local) @ rotation.T
+    gradient = robot_sdf.gradient(local)
+    if bridge_distance is not None:
+        distance = robot_sdf(local)
+        bridging = np.isfinite(distance) & (distance > bridge_distance)  # inf: off the grid
+        if bridging.any():
+            planes = robot_sdf.hull_planes()
+            facet = np.argmax(local[bridging] @ planes[:, :3].T + planes[:, 3], axis=1)
+            gradient[bridging] = planes[facet, :3]
+    gradient = gradient @ rotation.T
     if planar:
         gradient[:, 2] = 0.0
     length = np.linalg.norm(gradient, axis=1, keepdims=True)

@@ -8,6 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from stucco_drake.core.npz import save_npz_atomically
 
@@ -50,6 +51,7 @@ class GridSdf:
         self._strides = np.array([values.shape[1] * values.shape[2], values.shape[2], 1])
         self._flat = self.values.ravel()
         self._bounds_cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._hull_planes: np.ndarray | None = None
 
     # ----------------------------------------------------------------------------- construction
     @classmethod
@@ -241,6 +243,17 @@ class GridSdf:
 
         grad = np.stack([plane(1, a) - plane(0, a) for a in range(3)], axis=-1) / self.resolution
         return np.where(inside[..., None], grad, 0.0)
+
+    def hull_planes(self) -> np.ndarray:
+        """(m, 4) facets [n, d] of the convex hull of the solid (the nodes with distance <= 0):
+        outward unit normals n and offsets d, so n . p + d is how far p lies past each facet's
+        plane (m, the grid's frame). Computed once."""
+        if self._hull_planes is None:
+            nodes = np.argwhere(self.values <= 0.0)
+            if len(nodes) < 4:
+                raise ValueError("GridSdf.hull_planes: fewer than 4 nodes inside the solid")
+            self._hull_planes = ConvexHull(self.lower + self.resolution * nodes).equations
+        return self._hull_planes
 
     def bounds(self, level: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """Axis-aligned box containing every point whose interpolated distance is below ``level``.
