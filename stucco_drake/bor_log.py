@@ -25,6 +25,7 @@ from pydrake.systems.analysis import Simulator
 
 from stucco_drake.bor import build_bor_diagram, collision_shapes, object_surfaces, target_shape
 from stucco_drake.bor_episode import make_bor_simulator, run_episode
+from stucco_drake.core.grasp_yaw import cylinder_grasp_yaw
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.target_pose import estimate_target_pose
@@ -242,7 +243,9 @@ def grasp_from_log(log: EpisodeLog, tracker):
     gripper's pxpen at the logged end-effector positions since the chosen segment was last
     touched, ``penetration_configs="since_touch"``), with a generator seeded by
     ``[log.seed, 1]``; the grasp then runs in a freshly built grasp scene set to the logged
-    plant state (:func:`~stucco_drake.grasp.execute_grasp`). Returns the
+    plant state (:func:`~stucco_drake.grasp.execute_grasp`); a cylinder is closed on along the
+    yaw that keeps the fingers off the other segments' points
+    (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaw`). Returns the
     :class:`~stucco_drake.grasp.GraspResult`, or None when no segment can be fitted (no grasp
     is attempted: a failure).
     """
@@ -264,7 +267,11 @@ def grasp_from_log(log: EpisodeLog, tracker):
         built.plant.GetMyMutableContextFromRoot(context), log.final_state
     )
     simulator.Initialize()
-    return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw), shape)
+    rotation = log.ee_rotation[-1]
+    yaw = cylinder_grasp_yaw((estimate.x, estimate.y), points[labels != estimate.segment],
+                             math.atan2(rotation[1, 0], rotation[0, 0]))  # fmt: skip
+    return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw), shape,
+                         cylinder_yaw=yaw)  # fmt: skip
 
 
 def grasp_success(log: EpisodeLog, tracker) -> bool:
