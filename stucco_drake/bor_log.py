@@ -35,7 +35,7 @@ from stucco_drake.grasp import build_grasp_scene, execute_grasp
 from stucco_drake.gripper_sdf import gripper_penetration
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import yaw_of
-from stucco_drake.systems.contact_isolator import sample_gripper_surface
+from stucco_drake.systems.gripper_samples import sample_gripper_surface
 
 #: Half-width (m) of the uniform noise added to every action axis (paper Sec. V).
 ACTION_NOISE = 5e-4

@@ -47,7 +47,7 @@ from stucco_drake.bor_log import EpisodeRecorder, log_penetration
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.sources import EpisodeSource
 from stucco_drake.scenes import SceneFile, build_scene, load_scene
-from stucco_drake.systems.contact_isolator import sample_gripper_surface
+from stucco_drake.systems.gripper_samples import sample_gripper_surface
 from stucco_drake.systems.planar_controller import gripper_rotation
 
 #: The paper's training scenes.

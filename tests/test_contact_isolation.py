@@ -43,9 +43,8 @@ from stucco_drake.systems.contact_isolator import (
     GripperPoseFromState,
     pose_from_vector,
     pose_vector,
-    reachable_samples,
-    sample_gripper_surface,
 )
+from stucco_drake.systems.gripper_samples import reachable_samples, sample_gripper_surface
 
 H = 1e-3  # plant, estimator and detector period (s)
 ISO_H = 5e-3  # isolator period (s)
