@@ -21,6 +21,7 @@ import functools
 import math
 
 import numpy as np
+from pydrake.math import RotationMatrix
 from pydrake.systems.analysis import Simulator
 
 from stucco_drake.bor import build_bor_diagram, collision_shapes, object_surfaces, target_shape
@@ -267,9 +268,8 @@ def grasp_from_log(log: EpisodeLog, tracker):
         built.plant.GetMyMutableContextFromRoot(context), log.final_state
     )
     simulator.Initialize()
-    rotation = log.ee_rotation[-1]
     yaw = cylinder_grasp_yaw((estimate.x, estimate.y), points[labels != estimate.segment],
-                             math.atan2(rotation[1, 0], rotation[0, 0]))  # fmt: skip
+                             yaw_of(RotationMatrix(log.ee_rotation[-1])))  # fmt: skip
     return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw), shape,
                          cylinder_yaw=yaw)  # fmt: skip
 
