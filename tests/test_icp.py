@@ -219,6 +219,44 @@ def test_shape_evidence_breaks_a_variance_tie_on_real_points(seed):
     assert can.position_variance < 1.3 * target.position_variance
 
 
+#: Scene TC, seed 0, final tracked points (m, world): label 0 a cloud of points on the large
+#: master chef can that no circle or line fits, label 1 the target tomato can's -x side (true
+#: centre (0.2225, 0.0649)).
+TC_CLOUD_AND_TARGET = np.array(
+    [
+        [0.1426, -0.0947, 0.1815], [0.1584, -0.1118, 0.1143], [0.1376, -0.1136, 0.1143],
+        [0.1358, -0.1138, 0.1252], [0.1426, -0.0947, 0.1815], [0.1564, -0.1154, 0.1827],
+        [0.1257, -0.1344, 0.1085], [0.1267, -0.1348, 0.1086], [0.1104, -0.1548, 0.1132],
+        [0.1369, -0.1533, 0.1131], [0.1928, -0.1138, 0.1796], [0.1934, -0.1137, 0.1803],
+        [0.1838, 0.0622, 0.0692], [0.1864, 0.0577, 0.1157], [0.1860, 0.0477, 0.0877],
+        [0.1880, 0.0601, 0.0997], [0.1849, 0.0685, 0.0982], [0.1838, 0.0622, 0.0692],
+        [0.1847, 0.0697, 0.1199],
+    ]
+)  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_outline_fit_rejects_a_cloud_the_spread_and_shape_test_accept(seed):
+    """The cloud pins a small circle better than the target's 7 points do (lower spread) and,
+    with the noise pooled over both segments, passes the shape test; the tomato can's outline
+    misses it by 8.5 mm RMS against 1.4 mm on the target, which decides."""
+    labels = np.r_[np.zeros(12, int), np.ones(7, int)]
+    can = CylinderSdf(0.0384, 0.06)
+    paper = estimate_target_pose(
+        np.random.default_rng(seed), TC_CLOUD_AND_TARGET, labels, can, selection="paper"
+    )
+    estimate = estimate_target_pose(np.random.default_rng(seed), TC_CLOUD_AND_TARGET, labels, can)
+    cloud, target = estimate.segments
+    assert paper.segment == 0 and estimate.segment == 1
+    assert cloud.consistent and target.consistent
+    assert cloud.position_variance < 0.6 * target.position_variance
+    assert cloud.best_rms > 0.008 and target.best_rms < 0.002
+    # Without configs the side is not pinned: the centre is 3.84 cm (the radius) from the
+    # face's points, in front of them or behind.
+    distance = np.linalg.norm(TC_CLOUD_AND_TARGET[12:, :2] - estimate.pose[:2], axis=1)
+    assert abs(np.median(distance) - 0.0384) < 0.003
+
+
 def test_shape_rule_keeps_a_genuine_target_and_falls_back_when_all_fail():
     """A box corner fits better than any circle (negative excess); with only can arcs, every
     segment fails the test and the variance rule decides among them all, as the paper's."""
