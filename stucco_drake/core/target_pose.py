@@ -270,10 +270,11 @@ def estimate_target_pose(
     The outline's own fit settles a case both miss (scene TC, seed 0): a 12-point cloud of
     tracked points on a large can, which neither the target's 3.8 cm circle nor any curve fits
     (8.5 mm RMS), had the lower spread (4.6e-4 against 1.5e-3 m^2 for the 7 target points
-    fitted to 1.4 mm) and an excess near 0; its SSE over the 2 mm noise (54 against 0.9 for
-    the target) decides. On the Drake BOR logs (seeds 0-5, STUCCO) the target estimate was
-    within 2 cm in 6 of 6 TC runs with this term and 3 of 6 without; FB, IB and BC kept their
-    choices or improved (BC median position error 28 -> 12 cm).
+    fitted to 1.4 mm) and an excess near 0; its outline term, SSE / (2 sigma^2) with the 2 mm
+    noise, decides (109 against 1.6 for the target). On the Drake BOR logs (seeds 0-5,
+    STUCCO) the target estimate was within 2 cm in 6 of 6 TC runs with this term and 3 of 6
+    without; FB, IB and BC kept their choices or improved (BC median position error 28 -> 12
+    cm).
 
     Args:
         rng: caller-seeded generator for the ICP starts (segments in increasing label order).
