@@ -44,7 +44,7 @@ def executor_grasp(bor: BorDiagram, simulator: Simulator, estimate):
     labels = np.asarray(bor.tracking.GetOutputPort("segment_labels").Eval(tracking))
     plant_context = bor.scene.plant.GetMyContextFromRoot(context)
     X_WG = bor.scene.gripper_frame().CalcPoseInWorld(plant_context)
-    yaw = cylinder_grasp_yaw((estimate.x, estimate.y), points[labels != estimate.segment],
+    yaw = cylinder_grasp_yaw((estimate.x, estimate.y), points[~np.isin(labels, estimate.members)],
                              yaw_of(X_WG.rotation()))  # fmt: skip
     pose = (estimate.x, estimate.y, estimate.yaw)
     return execute_grasp(bor.scene, simulator, pose, bor.target_shape, cylinder_yaw=yaw)

@@ -268,7 +268,7 @@ def grasp_from_log(log: EpisodeLog, tracker):
         built.plant.GetMyMutableContextFromRoot(context), log.final_state
     )
     simulator.Initialize()
-    yaw = cylinder_grasp_yaw((estimate.x, estimate.y), points[labels != estimate.segment],
+    yaw = cylinder_grasp_yaw((estimate.x, estimate.y), points[~np.isin(labels, estimate.members)],
                              yaw_of(RotationMatrix(log.ee_rotation[-1])))  # fmt: skip
     return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw), shape,
                          cylinder_yaw=yaw)  # fmt: skip

@@ -8,16 +8,12 @@ for yaw). See :mod:`stucco_drake.core.icp` for the fitting itself.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
-from scipy.optimize import least_squares
 
-from stucco_drake.core.icp import (
-    cross_section_sdf,
-    icp_2d,
-    rotations,
-    sample_outline,
-)
+from stucco_drake.core.icp import cross_section_sdf, icp_2d, sample_outline
+from stucco_drake.core.outline_fit import shape_excess, shape_sse
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_penetration import (
     penetration_window,
@@ -28,21 +24,26 @@ from stucco_drake.core.validation import as_finite_array, as_rotation
 
 #: Segment selection rules of :func:`estimate_target_pose`.
 SELECTIONS = ("shape", "paper")
+
+
 @dataclasses.dataclass(frozen=True)
 class SegmentReport:
-    """ICP summary of one segment.
+    """ICP summary of one segment, or of the union of two.
 
     Attributes:
-        label: the segment's label.
+        label: the segment's label (the lower one of a union).
         n_points: its contact points.
         position_variance: sum of the unbiased variances of the restarts' x and y (m^2); NaN
             when the segment had too few points to be fitted.
         best_rms: lowest ICP RMS over its restarts (m); NaN when not fitted.
         shape_excess: how much worse the target's outline explains the points than the best
             circle or line does, as a log-likelihood-ratio statistic (dimensionless, see
-            :func:`shape_excess`); NaN when not fitted.
+            :func:`shape_excess`); NaN when not fitted. A union's is the sum of its fitted
+            members' (see :func:`estimate_target_pose`).
         consistent: whether the segment passed the shape test (``shape_excess`` at most the
-            threshold); True when the rule does not test shapes, False when not fitted.
+            threshold; for a union, whether every fitted member did); True when the rule does
+            not test shapes, False when not fitted.
+        merged_with: the other segment's label of a union; empty for a segment alone.
     """
 
     label: int
@@ -51,6 +52,12 @@ class SegmentReport:
     best_rms: float
     shape_excess: float = np.nan
     consistent: bool = False
+    merged_with: tuple[int, ...] = ()
+
+    @property
+    def members(self) -> tuple[int, ...]:
+        """The labels of the segments whose points were fitted together."""
+        return (self.label, *self.merged_with)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,22 +67,28 @@ class TargetPoseEstimate:
     Attributes:
         x, y: position of the target's frame O in W (m).
         yaw: its rotation about world z (rad, in [-pi, pi)).
-        segment: label of the chosen segment.
+        segment: label of the chosen segment (of a chosen union, its member with the most
+            points).
+        members: labels of every segment whose points were fitted: ``(segment,)``, or both
+            of a union (see ``merge_segments``).
         rms: ICP RMS of the chosen restart (m).
         penetration: its summed robot penetration beyond the tolerance (m, over all
             (config, model point) pairs; 0 when nothing penetrates).
         restarts: (B, 3) every restart's pose (x, y, yaw) for the chosen segment.
         segments: one report per segment, in increasing label order.
+        unions: one report per union of two segments that was a candidate.
     """
 
     x: float
     y: float
     yaw: float
     segment: int
+    members: tuple[int, ...]
     rms: float
     penetration: float
     restarts: np.ndarray
     segments: tuple[SegmentReport, ...]
+    unions: tuple[SegmentReport, ...] = ()
 
     @property
     def pose(self) -> np.ndarray:
@@ -83,87 +96,18 @@ class TargetPoseEstimate:
         return np.array([self.x, self.y, self.yaw])
 
 
-def curve_sse(points_xy) -> tuple[float, float]:
-    """Sum of squared distances (m^2) of ``points_xy`` ((n, 2), m) to their best circle or line.
-
-    Returns (sse, radius): the smaller of the geometric circle fit's and the total-least-squares
-    line fit's squared residuals, and the circle's radius (m; inf when the line wins). The line
-    is the circle's infinite-radius limit, where the circle fit is ill-conditioned, so it is
-    fitted on its own. The circle starts at the algebraic (Kasa) fit and is refined by
-    Gauss-Newton on the geometric residuals |p - c| - r, which the algebraic fit biases on
-    short arcs.
-    """
-    centred = points_xy - points_xy.mean(axis=0)
-    line = float(np.linalg.svd(centred, compute_uv=False)[-1] ** 2)
-    if len(centred) < 3:
-        return line, np.inf
-    design = np.column_stack([centred, np.ones(len(centred))])
-    solution = np.linalg.lstsq(design, np.sum(centred**2, axis=1), rcond=None)[0]
-    centre = solution[:2] / 2.0
-    radius = float(np.sqrt(max(solution[2] + centre @ centre, 0.0)))
-    best = (line, np.inf)
-    for _ in range(20):
-        offset = centred - centre
-        distance = np.linalg.norm(offset, axis=1)
-        if not np.all(np.isfinite(distance)) or np.any(distance == 0.0):
-            break
-        residual = distance - radius
-        if residual @ residual < best[0]:
-            best = (float(residual @ residual), radius)
-        jacobian = np.column_stack([-offset / distance[:, None], -np.ones(len(centred))])
-        step = np.linalg.lstsq(jacobian, -residual, rcond=None)[0]
-        if not np.all(np.isfinite(step)):
-            break
-        centre, radius = centre + step[:2], abs(radius + step[2])
-    return best
+def outline_extent(shape: BoxSdf | CylinderSdf) -> float:
+    """The largest distance between two points of ``shape``'s cross-section (m): a box's
+    diagonal, a cylinder's diameter."""
+    if isinstance(shape, BoxSdf):
+        return float(2.0 * np.hypot(*shape.half_extents[:2]))
+    return 2.0 * float(shape.radius)
 
 
-def shape_sse(points_xy, poses, shape: BoxSdf | CylinderSdf) -> tuple[float, float]:
-    """Squared residuals (m^2) of the points under the target's outline and under a curve.
-
-    Returns (target, curve): the sum of squared exact outline distances |sdf| of
-    ``points_xy`` ((n, 2), m) at the best of ``poses`` (B, 3), polished, and
-    :func:`curve_sse` of the points (best circle or line). Both models have 3 parameters (a
-    planar pose; a circle's centre and radius or a line's 2, so the curve is never the
-    simpler model).
-    """
-    sdf = cross_section_sdf(shape)
-
-    def residuals(pose):
-        # Points in the pose's frame O: R^T (p - t), as row vectors.
-        return sdf((points_xy - pose[None, :2]) @ rotations(pose[2]))
-
-    local = np.einsum("bni,bij->bnj", points_xy[None] - poses[:, None, :2], rotations(poses[:, 2]))
-    sse = np.sum(sdf(local.reshape(-1, 2)).reshape(len(poses), -1) ** 2, axis=1)
-    # Point-to-point ICP against a sampled outline stops short of the exact optimum (slow
-    # sliding, 2 mm samples), which would count against a genuine target; polish the best
-    # restart on the exact outline distance.
-    polished = least_squares(
-        residuals, poses[np.argmin(sse)], x_scale=[0.01, 0.01, 0.1], max_nfev=50
-    ).x
-    target = min(float(sse.min()), float(np.sum(residuals(polished) ** 2)))
-    return target, curve_sse(points_xy)[0]
-
-
-def shape_excess(fits, noise: float) -> np.ndarray:
-    """(s,) how much worse the target's outline explains each segment than a circle or line.
-
-    ``fits`` (s, 3) holds each segment's (target SSE, curve SSE, point count), see
-    :func:`shape_sse`. With contact points scattered normally (standard deviation sigma, m)
-    about the touched surface, twice the log-likelihood ratio of the two 3-parameter fits is
-    their difference in squared residuals over sigma^2; positive values favour the curve.
-
-    sigma is a property of the sensor, shared by all segments: it is the median over segments
-    of the better model's residual variance (SSE over n - 3 degrees of freedom), floored at
-    ``noise`` (m). Pooling keeps a genuine target seen through heavier noise than ``noise``
-    from being rejected (alone, the statistic is then an F-test), while a clutter segment whose
-    residuals are large under every model cannot dilute its own evidence.
-    """
-    fits = np.asarray(fits, dtype=np.float64).reshape(-1, 3)
-    target, curve, count = fits.T
-    variance = np.minimum(target, curve) / np.maximum(count - 3.0, 1.0)
-    sigma2 = max(noise**2, float(np.median(variance)))
-    return (target - curve) / sigma2
+def xy_extent(points) -> float:
+    """The largest horizontal distance between two of ``points`` ((n, 3) or (n, 2), m)."""
+    xy = np.asarray(points)[:, :2]
+    return float(np.sqrt(np.max(np.sum((xy[:, None] - xy[None]) ** 2, axis=-1))))
 
 
 def sample_cross_section(shape: BoxSdf | CylinderSdf, spacing: float) -> np.ndarray:
@@ -202,6 +146,7 @@ def estimate_target_pose(
     shape_threshold: float = 9.0,
     penetration_configs: str | int = "all",
     point_steps=None,
+    merge_segments: bool = True,
 ) -> TargetPoseEstimate:
     """Estimate the target's planar pose from segmented contact points (paper Sec. V-C).
 
@@ -276,6 +221,17 @@ def estimate_target_pose(
     without; FB, IB and BC kept their choices or improved (BC median position error 28 -> 12
     cm).
 
+    With ``merge_segments`` (default, ``selection="shape"`` only) the union of any two segments
+    whose points span no more than the target's cross-section can (:func:`outline_extent` plus
+    3 ``contact_noise``) is a candidate too, fitted and scored like a segment. The
+    segmentation knows nothing of the target: touched only at the two ends of a 16 cm side, a
+    box becomes two segments farther apart than the segmentation radius, and either alone
+    leaves the box free to slide along that side. A union the outline explains as well pins it
+    (a low spread); one it does not pays for its misfit in the outline term. A union is not
+    compared with a circle or line (two patches of one box need not lie on one curve); it
+    carries its members' shape evidence instead: each fitted member must pass the test, and
+    its statistic is theirs summed.
+
     Args:
         rng: caller-seeded generator for the ICP starts (segments in increasing label order).
         points: (n, 3) contact points in W (m), e.g. ``SoftTracker.map_points()``.
@@ -299,6 +255,7 @@ def estimate_target_pose(
             :func:`penetration_window` (configs must be passed oldest first).
         point_steps: (n,) index into ``config_positions`` of the config at which each point
             was sensed (for ``penetration_configs="since_touch"``).
+        merge_segments: whether unions of two segments compete as candidates (see above).
 
     Raises:
         ValueError: naming the argument, e.g. no contact points or no segment to fit.
@@ -329,57 +286,79 @@ def estimate_target_pose(
         if point_steps.shape != (len(points),) or not np.issubdtype(point_steps.dtype, np.integer):
             raise ValueError(f"point_steps: expected {len(points)} integer config indices")
 
-    fits, sizes, unfitted = {}, {}, []
-    for label in np.unique(labels[labels >= 0]):
-        members = points[labels == label]
-        sizes[int(label)] = len(members)
-        if len(members) < min_points:
-            unfitted.append(int(label))
+    groups = {(int(label),): points[labels == label] for label in np.unique(labels[labels >= 0])}
+    singles = list(groups)
+    if selection == "shape" and merge_segments:
+        # The segmentation cuts the target in two when it was touched at places farther apart
+        # than the segmentation radius (a 16 cm box side touched at both ends); any two
+        # segments that together fit within the target's extent compete as one.
+        reach = outline_extent(shape) + 3.0 * contact_noise
+        for first, second in itertools.combinations(singles, 2):
+            union = np.concatenate([groups[first], groups[second]])
+            if len(union) >= min_points and xy_extent(union) <= reach:
+                groups[first + second] = union
+    fits = {}
+    for members, group in groups.items():
+        if len(group) < min_points:
             continue
         result = icp_2d(
-            rng, members[:, :2], model, n_restarts, max_iterations, tolerance, initial_pose, start
+            rng, group[:, :2], model, n_restarts, max_iterations, tolerance, initial_pose, start
         )
         spread = float(np.sum(np.var(result.poses[:, :2], axis=0, ddof=1)))
-        sse = shape_sse(members[:, :2], result.poses, shape)
+        sse = shape_sse(group[:, :2], result.poses, shape)
         # The model is posed at the segment's mean contact height for the penetration check.
-        fits[int(label)] = (spread, result, float(members[:, 2].mean()), (*sse, len(members)))
+        fits[members] = (spread, result, float(group[:, 2].mean()), (*sse, len(group)))
     if not fits:
         raise ValueError(f"labels: no segment has at least {min_points} points")
-    statistics = shape_excess([fit[3] for fit in fits.values()], contact_noise)
-    excess = dict(zip(fits, statistics, strict=True))
+    fitted = [members for members in singles if members in fits]
+    statistics = shape_excess([fits[m][3] for m in fitted], contact_noise) if fitted else []
+    excess = dict(zip(fitted, statistics, strict=True))
     consistent = {
-        label: selection == "paper" or bool(excess[label] <= shape_threshold) for label in fits
+        members: selection == "paper" or bool(excess[members] <= shape_threshold)
+        for members in fitted
     }
-    reports = [
-        SegmentReport(label, sizes[label], np.nan, np.nan)
-        if label in unfitted
+    for members in fits.keys() - excess.keys():
+        # Two patches of one box need not lie on one circle or line, so comparing a union with
+        # a curve says nothing (an L-shaped face and a can arc fit none: a large, meaningless
+        # negative excess). A union carries its members' own evidence: each fitted member must
+        # pass the test, and their statistics add (independent points, log-likelihoods add).
+        own = [(label,) for label in members if (label,) in excess]
+        excess[members] = float(sum(excess[m] for m in own))
+        consistent[members] = all(consistent[m] for m in own)
+    reports = tuple(
+        SegmentReport(members[0], len(groups[members]), np.nan, np.nan, merged_with=members[1:])
+        if members not in fits
         else SegmentReport(
-            label,
-            sizes[label],
-            fits[label][0],
-            float(fits[label][1].rms.min()),
-            float(excess[label]),
-            consistent[label],
+            members[0],
+            len(groups[members]),
+            fits[members][0],
+            float(fits[members][1].rms.min()),
+            float(excess[members]),
+            consistent[members],
+            merged_with=members[1:],
         )
-        for label in sorted(sizes)
-    ]
-    candidates = [label for label in fits if consistent[label]]
+        for members in groups
+    )
+    candidates = [members for members in fits if consistent[members]]
     if selection == "paper" or not candidates:
         # With every segment inconsistent the shape says nothing about which one is the target.
-        chosen = min(fits, key=lambda label: fits[label][0])
+        chosen = min(fits, key=lambda members: fits[members][0])
     else:
         # All criteria as log-scores: half the shape statistic is a log-likelihood ratio, the
         # log makes the variance scale-free, so a factor in spread trades against a factor in
         # likelihood, and the outline's SSE over the known noise is its own negative log
         # likelihood. The last is what rejects a scattered cloud: the relative test pools its
         # noise over the segments, so a cloud no model fits inflates the pool and passes, and
-        # a small circle slid into it converges to one place (a low spread). The variance is
-        # floored to keep a degenerate spread from being -inf.
+        # a small circle slid into it converges to one place (a low spread). It also keeps a
+        # union honest: joining a segment the outline cannot also explain costs its misfit.
+        # The variance is floored to keep a degenerate spread from being -inf.
         chosen = min(
             candidates,
-            key=lambda label: 0.5 * excess[label]
-            + np.log(max(fits[label][0], 1e-12))
-            + 0.5 * fits[label][3][0] / contact_noise**2,
+            key=lambda members: (
+                0.5 * excess[members]
+                + np.log(max(fits[members][0], 1e-12))
+                + 0.5 * fits[members][3][0] / contact_noise**2
+            ),
         )
     _, result, height, _ = fits[chosen]
     scores = np.zeros(n_restarts)
@@ -387,7 +366,7 @@ def estimate_target_pose(
         window = penetration_window(
             len(configs),
             penetration_configs,
-            None if point_steps is None else point_steps[labels == chosen],
+            None if point_steps is None else point_steps[np.isin(labels, chosen)],
         )
         scores = restart_penetration(
             penetration,
@@ -407,9 +386,11 @@ def estimate_target_pose(
         x=float(x),
         y=float(y),
         yaw=float(yaw),
-        segment=chosen,
+        segment=max(chosen, key=lambda label: (int(np.sum(labels == label)), -label)),
+        members=chosen,
         rms=float(result.rms[best]),
         penetration=float(scores[best]),
         restarts=result.poses.copy(),
-        segments=tuple(reports),
+        segments=tuple(r for r in reports if not r.merged_with),
+        unions=tuple(r for r in reports if r.merged_with),
     )
