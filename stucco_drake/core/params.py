@@ -26,6 +26,14 @@ class SoftTrackingParams:
             isolation error, or the first millimetres of a soft bubble's deformation.
         resample_ess_fraction: resample when the effective sample size falls below this fraction
             of N. 1.0 resamples at every step as the paper's text does; the authors' code uses 0.8.
+        touched_side_margin: None (the paper) or a distance (m) that turns on the touched-side
+            rule of the prediction: a push moves only points that can lie on the object it
+            touched. That object is convex and lies beyond the robot's tangent plane at the
+            contact, so a point more than ``touched_side_margin + d * s`` behind that plane
+            (d its distance to the contact, s the normal's uncertainty, see
+            :func:`~stucco_drake.core.contact_motion.normal_spread`) stays where it is.
+        normal_probe_radius: how far (m) around a contact the robot's normal is compared to
+            judge its uncertainty s: about the contact isolation's error.
     """
 
     length: float = 0.02
@@ -34,6 +42,8 @@ class SoftTrackingParams:
     connection_threshold: float = 0.4
     intersection_tolerance: float = 0.002
     resample_ess_fraction: float = 0.8
+    touched_side_margin: float | None = None
+    normal_probe_radius: float = 0.003
 
     def __post_init__(self):
         for name in ("length", "penetration_length"):
@@ -55,6 +65,18 @@ class SoftTrackingParams:
             raise ValueError(
                 "SoftTrackingParams.intersection_tolerance: must be >= 0, "
                 f"got {self.intersection_tolerance!r}"
+            )
+        margin = self.touched_side_margin
+        if margin is not None and not (
+            isinstance(margin, int | float) and math.isfinite(margin) and margin >= 0
+        ):
+            raise ValueError(
+                f"SoftTrackingParams.touched_side_margin: must be None or >= 0, got {margin!r}"
+            )
+        if not (math.isfinite(self.normal_probe_radius) and self.normal_probe_radius > 0):
+            raise ValueError(
+                "SoftTrackingParams.normal_probe_radius: must be > 0, "
+                f"got {self.normal_probe_radius!r}"
             )
         if not 0.0 < self.resample_ess_fraction <= 1.0:
             raise ValueError(

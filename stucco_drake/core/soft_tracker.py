@@ -6,6 +6,7 @@ import copy
 
 import numpy as np
 
+from stucco_drake.core.contact_motion import normal_spread, robot_surface_normals
 from stucco_drake.core.dynamics import ContactDynamics, TranslationDynamics
 from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.core.penetration import RobotPenetration
@@ -47,7 +48,10 @@ class SoftTracker:
        the previous ReplaceBad left every other pair consistent.
     6. The MAP particle is the heaviest one, ties kept with the previous MAP; after resampling it
        is the first copy of that particle, so it also receives ReplaceBad's repairs.
-    7. Segmentation is the exact connected components of the MAP particle (paper); the authors'
+    7. Optionally (``touched_side_margin``, off by default) a point does not follow a contact
+       it lies clearly behind: see :class:`~stucco_drake.core.params.SoftTrackingParams`.
+       The rule uses no random draw, so it changes no other draw of the step.
+    8. Segmentation is the exact connected components of the MAP particle (paper); the authors'
        code expands only one level from each seed.
 
     Args:
@@ -202,12 +206,30 @@ class SoftTracker:
             nearest = np.argmin(d2, axis=2)
             nearest_d2 = np.take_along_axis(d2, nearest[:, :, None], axis=2)[:, :, 0]
             connected = rng.random(nearest.shape) < np.exp(-nearest_d2 / self.params.length)
+            if self.params.touched_side_margin is not None:
+                connected &= self._on_touched_side(
+                    existing, before, nearest, nearest_d2, points, position, rotation
+                )
             self.dynamics.apply(existing, self._configs[:, :, :n], connected, dx[nearest])
         self._ensure_capacity(n + m)
         self._points[:, :, n : n + m] = points.T[:, None, :]
         self._configs[:, :, n : n + m] = position[:, None, None]
         self._rotation_index[:, n : n + m] = self._rotation_slot(rotation)
         self._n = n + m
+
+    def _on_touched_side(self, existing, before, nearest, nearest_d2, points, position, rotation):
+        """(n_particles, n) whether each point may lie on the object its nearest new contact
+        touched: not more than margin + d * spread behind the robot's tangent plane there."""
+        sdf = self.penetration.robot_sdf
+        normals = robot_surface_normals(sdf, points, position, rotation).astype(np.float32)
+        spread = normal_spread(sdf, points, position, rotation,
+                               radius=self.params.normal_probe_radius)  # fmt: skip
+        ahead = np.zeros(nearest.shape, dtype=np.float32)
+        for axis in range(3):
+            ahead += (existing[axis] - before[nearest, axis]) * normals[nearest, axis]
+        allowed = self.params.touched_side_margin + spread[nearest] * np.sqrt(nearest_d2)
+        unknown = ~normals.any(axis=1)[nearest]  # no normal, no rule
+        return unknown | (ahead >= -allowed)
 
     def _in_frame(self, rotation: np.ndarray, array: np.ndarray) -> np.ndarray:
         """Coordinates of world vectors ``array[3, ...]`` along the axes of ``rotation``."""

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from stucco_drake.core.baselines import TRACKER_NAMES
 from stucco_drake.core.contact_motion import DX_MODELS
+from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.replay import replay
 from stucco_drake.eval.results import RunResults, row_key
@@ -65,15 +66,18 @@ def load_cached_log(out, scene: str, seed: int) -> EpisodeLog:
 
 
 def replay_cached(task: tuple[str, int, str], out: str, sources: Sources,
-                  dx_model: str = "ee") -> dict:
+                  dx_model: str = "ee", stucco_params: SoftTrackingParams | None = None) -> dict:
     """One run (scene, seed, method) replayed from its cached log, with the scene source's
-    pxpen and grasp and contact motion ``dx_model`` (runs in a worker)."""
+    pxpen and grasp, contact motion ``dx_model`` and, for STUCCO, ``stucco_params`` (None:
+    the paper's Table I) (runs in a worker)."""
     scene, seed, method = task
     log, source = load_cached_log(out, scene, seed), sources[scene]
     penetration = source.penetration_for(log, method)
     if dx_model != "ee" and penetration is None and source.penetration is not None:
         penetration = source.penetration(log)  # the normals come from the robot's geometry
-    return replay(log, method, penetration=penetration, grasp=source.grasp, dx_model=dx_model)
+    params = stucco_params if method == "stucco" else None
+    return replay(log, method, params=params, penetration=penetration, grasp=source.grasp,
+                  dx_model=dx_model)
 
 
 def simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
@@ -112,12 +116,14 @@ def make_table(
     progress=None,
     sources: Sources = SYNTHETIC_SOURCES,
     dx_model: str = "ee",
+    stucco_params: SoftTrackingParams | None = None,
 ) -> list[dict]:
     """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
 
     ``sources`` maps each scene name to its :class:`EpisodeSource`; ``dx_model`` is how every
-    method moves contact points (see :func:`~stucco_drake.eval.replay.replay`; keep one per
-    OUT folder: rows are keyed by scene, seed and method only). Returns the table's rows (from
+    method moves contact points (see :func:`~stucco_drake.eval.replay.replay`) and
+    ``stucco_params`` STUCCO's parameters (None: Table I); keep one of each per OUT folder:
+    rows are keyed by scene, seed and method only. Returns the table's rows (from
     ``OUT/runs.csv``, including runs of earlier calls).
     """
     check_names(scenes, methods, sources)
@@ -126,7 +132,7 @@ def make_table(
     out = Path(out)
     results = RunResults(out / "runs.csv")
     replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources),
-                                    dx_model=dx_model)
+                                    dx_model=dx_model, stucco_params=stucco_params)
     wanted = {(scene, seed, method) for seed in range(runs) for scene in scenes
               for method in methods}  # fmt: skip
 
@@ -162,6 +168,8 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES) -> None:
     table.add_argument("--dx-model", choices=DX_MODELS, default="ee",
                        help="how contact points move: the end effector's displacement in "
                             "contact (ee, the paper) or its part along the contact normal")
+    table.add_argument("--stucco-params", metavar="PARAMS.yaml", default=None,
+                       help="STUCCO's parameters as YAML overrides of Table I (default: Table I)")
     table.add_argument("--workers", type=int, default=None,
                        help="parallel workers (default: one per CPU)")
     table.add_argument("--executor", choices=("process", "dask"), default="process",
@@ -177,6 +185,8 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
         check_names(args.scenes, args.methods, sources)
         if args.scheduler is not None and args.executor != "dask":
             raise ValueError("--scheduler needs --executor dask")
+        stucco_params = (None if args.stucco_params is None
+                         else SoftTrackingParams.from_yaml(Path(args.stucco_params)))
         executor = make_executor(args.executor, args.workers, args.scheduler)
     except (ValueError, RuntimeError) as error:
         print(f"stucco-drake table: error: {error}", file=sys.stderr)
@@ -184,7 +194,8 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
     try:
         with executor:
             rows = make_table(args.scenes, args.methods, args.runs, args.out, executor,
-                              sources=sources, dx_model=args.dx_model)
+                              sources=sources, dx_model=args.dx_model,
+                              stucco_params=stucco_params)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1
