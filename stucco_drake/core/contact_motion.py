@@ -102,7 +102,6 @@ def robot_surface_normals(
     return np.where(length > _MIN_GRADIENT, gradient / np.maximum(length, _MIN_GRADIENT), 0.0)
 
 
-
 def normal_spread(
     robot_sdf: GridSdf, points, ee_position, ee_rotation=None, *, radius: float = 0.003
 ) -> np.ndarray:
@@ -128,6 +127,7 @@ def normal_spread(
         sine = np.where(cos > 0.0, np.sqrt(np.clip(1.0 - cos**2, 0.0, 1.0)), 1.0)
         spread = np.maximum(spread, np.where(known, sine, 0.0))
     return spread
+
 
 def contact_motion(
     model: str,
