@@ -103,8 +103,9 @@ def robot_surface_normals(
 
 
 def normal_spread(
-    robot_sdf: GridSdf, points, ee_position, ee_rotation=None, *, radius: float = 0.003
-) -> np.ndarray:
+    robot_sdf: GridSdf, points, ee_position, ee_rotation=None, *, radius: float = 0.003,
+    normals=None,
+) -> np.ndarray:  # fmt: skip
     """(n,) how far each contact's robot normal can be trusted: the sine of the largest angle
     between the planar normal at the point (:func:`robot_surface_normals`) and the normals at
     the six points ``radius`` (m) away along the axes of E; 1 where one of them turns by 90
@@ -113,11 +114,13 @@ def normal_spread(
     A contact is isolated to within a few millimetres. On a flat face of the robot every
     normal within that distance is the same (0); across an edge, or around a bubble's tight
     rim, the touched object's true normal may be any of them (up to 1). Points whose normal
-    or neighbour's normal is unknown (off the grid) count 0 for that neighbour.
+    or neighbour's normal is unknown (off the grid) count 0 for that neighbour. ``normals``:
+    the points' own normals when the caller already has them (unit rows, frame W).
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     rotation = np.eye(3) if ee_rotation is None else np.asarray(ee_rotation, dtype=np.float64)
-    centre = robot_surface_normals(robot_sdf, points, ee_position, ee_rotation)
+    centre = (robot_surface_normals(robot_sdf, points, ee_position, ee_rotation)
+              if normals is None else np.asarray(normals, dtype=np.float64).reshape(-1, 3))
     spread = np.zeros(len(points))
     for step in np.concatenate([np.eye(3), -np.eye(3)]) * radius:
         nearby = robot_surface_normals(robot_sdf, points + rotation @ step, ee_position,

@@ -221,9 +221,10 @@ class SoftTracker:
         """(n_particles, n) whether each point may lie on the object its nearest new contact
         touched: not more than margin + d * spread behind the robot's tangent plane there."""
         sdf = self.penetration.robot_sdf
-        normals = robot_surface_normals(sdf, points, position, rotation).astype(np.float32)
-        spread = normal_spread(sdf, points, position, rotation,
+        normals = robot_surface_normals(sdf, points, position, rotation)
+        spread = normal_spread(sdf, points, position, rotation, normals=normals,
                                radius=self.params.normal_probe_radius)  # fmt: skip
+        normals = normals.astype(np.float32)
         ahead = np.zeros(nearest.shape, dtype=np.float32)
         for axis in range(3):
             ahead += (existing[axis] - before[nearest, axis]) * normals[nearest, axis]
