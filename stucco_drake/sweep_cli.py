@@ -12,9 +12,10 @@ import sys
 from collections.abc import Mapping
 
 from stucco_drake.core.baselines import TRACKER_NAMES
+from stucco_drake.core.contact_motion import DX_MODELS
 from stucco_drake.eval.runner import RunInterrupted, make_executor
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
-from stucco_drake.eval.sweep import AMBIGUOUS, parse_grid, run_sweep
+from stucco_drake.eval.sweep import AMBIGUOUS, parse_grid, run_sweep, tuned_path
 from stucco_drake.training import TRAINING_SCENES, TRAINING_SOURCES
 
 SWEEP_SOURCES = {**TRAINING_SOURCES, **SYNTHETIC_SOURCES}
@@ -34,6 +35,10 @@ def add_sweep_command(subparsers, sources: Mapping[str, EpisodeSource] = SWEEP_S
                        help="output folder (logs, sweep.csv, tuned_<method>.yaml)")
     sweep.add_argument("--workers", type=int, default=None,
                        help="parallel worker processes (default: one per CPU)")
+    sweep.add_argument("--dx-model", choices=DX_MODELS, default="ee",
+                       help="how contact points move in the replays: the end effector's "
+                            "displacement in contact (ee, the paper) or its part along the "
+                            "contact normal")
     sweep.add_argument("--grid", action="append", default=None, metavar="NAME=V1,V2,...",
                        help="values of one parameter (repeatable; default: the method's "
                             "primary parameter around its paper value)")
@@ -54,7 +59,7 @@ def run_sweep_command(args: argparse.Namespace,
     try:
         with executor:
             tuned = run_sweep(args.method, args.scenes, args.trials, args.out, executor, grid,
-                              sources)
+                              sources, dx_model=args.dx_model)
     except RunInterrupted as error:
         print(f"stucco-drake sweep: {error}", file=sys.stderr)
         return 1
@@ -66,5 +71,6 @@ def run_sweep_command(args: argparse.Namespace,
           f"{tuned['n_trials']} trials: median FMI {tuned['median_fmi']:.3f}, median CE "
           f"{tuned['median_ce_cm']:.2f} cm; ambiguous (>= {AMBIGUOUS}, {amb['n_runs']} runs): "
           f"median FMI {amb['median_fmi']:.3f}, median CE {amb['median_ce_cm']:.2f} cm")
-    print(f"written {args.out}/tuned_{args.method}.yaml and {args.out}/sweep.csv")
+    print(f"written {tuned_path(args.out, args.method, args.dx_model)} and "
+          f"{args.out}/sweep.csv")
     return 0

@@ -226,3 +226,37 @@ def test_bad_grid_entry_is_a_one_line_error(tmp_path, capsys, entry, message):
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1, err
     assert not (tmp_path / "logs").exists()
+
+
+def test_optional_parameter_is_swept_with_none_for_off():
+    grid = parse_grid("stucco", ["touched_side_margin=none,0.002,None"])
+    assert grid == {"touched_side_margin": (None, 0.002)}
+    with pytest.raises(ValueError, match=r"touched_side_margin=-1.*must be None or >= 0"):
+        parse_grid("stucco", ["touched_side_margin=-1"])
+    with pytest.raises(ValueError, match="'off' is not a number"):
+        parse_grid("stucco", ["touched_side_margin=off"])
+
+
+def test_sweep_under_the_normal_contact_motion_keeps_its_own_runs(tmp_path):
+    sources = {"SYN2": EpisodeSource(synthetic_episode)}
+    grid = parse_grid("stucco", ["touched_side_margin=none,0.002"])
+    runs = {}
+    for dx_model in ("ee", "normal"):
+        executor = CountingExecutor()
+        with executor:
+            runs[dx_model] = run_sweep("stucco", ["SYN2"], 1, tmp_path, executor, grid, sources,
+                                       progress=False, dx_model=dx_model)  # fmt: skip
+        # The second model simulates nothing new but replays both combinations again.
+        assert executor.submitted == (1 if dx_model == "ee" else 0) + 2
+    assert runs["ee"]["dx_model"] == "ee" and runs["normal"]["dx_model"] == "normal"
+    assert yaml.safe_load((tmp_path / "tuned_stucco.yaml").read_text()) == runs["ee"]
+    assert yaml.safe_load((tmp_path / "tuned_stucco_normal.yaml").read_text()) == runs["normal"]
+    labels = [line.split(",")[2] for line in (tmp_path / "sweep.csv").read_text().splitlines()[1:]]
+    assert sorted(labels) == sorted([
+        "stucco[touched_side_margin=None]", "stucco[touched_side_margin=0.002]",
+        "stucco@normal[touched_side_margin=None]", "stucco@normal[touched_side_margin=0.002]",
+    ])  # fmt: skip
+    for tuned in runs.values():
+        assert tuned["n_runs"] == 1 and 0.0 <= tuned["median_fmi"] <= 1.0
+        assert [c["params"] for c in tuned["combinations"]] == [
+            {"touched_side_margin": None}, {"touched_side_margin": 0.002}]

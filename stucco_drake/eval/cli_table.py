@@ -65,6 +65,16 @@ def load_cached_log(out, scene: str, seed: int) -> EpisodeLog:
     return log
 
 
+def replay_penetration(source: EpisodeSource, log: EpisodeLog, method: str, dx_model: str):
+    """The robot's pxpen a replay of ``method`` on ``log`` needs: the source's for STUCCO, and
+    for any method under a contact motion other than ``"ee"``, whose normals come from the
+    robot's geometry (None when neither applies)."""
+    penetration = source.penetration_for(log, method)
+    if dx_model != "ee" and penetration is None and source.penetration is not None:
+        penetration = source.penetration(log)
+    return penetration
+
+
 def replay_cached(task: tuple[str, int, str], out: str, sources: Sources,
                   dx_model: str = "ee", stucco_params: SoftTrackingParams | None = None) -> dict:
     """One run (scene, seed, method) replayed from its cached log, with the scene source's
@@ -72,9 +82,7 @@ def replay_cached(task: tuple[str, int, str], out: str, sources: Sources,
     the paper's Table I) (runs in a worker)."""
     scene, seed, method = task
     log, source = load_cached_log(out, scene, seed), sources[scene]
-    penetration = source.penetration_for(log, method)
-    if dx_model != "ee" and penetration is None and source.penetration is not None:
-        penetration = source.penetration(log)  # the normals come from the robot's geometry
+    penetration = replay_penetration(source, log, method, dx_model)
     params = stucco_params if method == "stucco" else None
     return replay(log, method, params=params, penetration=penetration, grasp=source.grasp,
                   dx_model=dx_model)

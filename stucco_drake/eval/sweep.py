@@ -8,8 +8,9 @@ finished replay is appended to ``OUT/sweep.csv`` (a runs file, see
 :class:`~stucco_drake.eval.results.RunResults`, whose ``method`` column is the combination's
 label, e.g. ``stucco[length=0.02]``), so a rerun skips what is done. The tuned combination
 maximises the median FMI over all kept trials and, among equal medians, minimises the median
-CE; it is written to ``OUT/tuned_<method>.yaml`` with both medians overall and on the
-ambiguous trials (ambiguity >= :data:`AMBIGUOUS`).
+CE; it is written to ``OUT/tuned_<method>.yaml`` (``tuned_<method>_<dx_model>.yaml`` under a
+contact motion other than the paper's) with both medians overall and on the ambiguous trials
+(ambiguity >= :data:`AMBIGUOUS`).
 """
 
 from __future__ import annotations
@@ -32,11 +33,13 @@ from stucco_drake.core.baselines import (
     GmPhdParams,
     KMeansParams,
 )
+from stucco_drake.core.contact_motion import DX_MODELS
 from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.eval.cli_table import (
     check_names,
     episode_path,
     load_cached_log,
+    replay_penetration,
     simulate_missing,
 )
 from stucco_drake.eval.episode_log import EpisodeLog
@@ -72,8 +75,13 @@ Grid = dict[str, tuple]
 
 # ------------------------------------------------------------------------------------ grids
 def _parse_value(text: str, kind: type, where: str):
-    """One grid value of a field whose default is of type ``kind``."""
+    """One grid value of a field whose default is of type ``kind`` (``NoneType``: an
+    optional number, off by default, whose value may be ``none`` or a number)."""
     text = text.strip()
+    if kind is type(None):
+        if text.lower() == "none":
+            return None
+        kind = float
     if kind is bool:
         if text.lower() in ("true", "1", "yes"):
             return True
@@ -104,7 +112,9 @@ def make_params(method: str, combination: Mapping):
 def parse_grid(method: str, entries: Sequence[str] | None) -> Grid:
     """The grid of ``--grid name=v1,v2,...`` entries (default :data:`DEFAULT_GRIDS`).
 
-    Values take the type of the field's default (number, integer, true/false). Raises a
+    Values take the type of the field's default (number, integer, true/false; ``none`` or a
+    number for an optional field that is off by default, e.g. STUCCO's
+    ``touched_side_margin``). Raises a
     one-line ValueError naming the bad entry: no ``=``, an unknown or repeated parameter, an
     empty or malformed value, or a value the method's parameters reject.
     """
@@ -114,7 +124,7 @@ def parse_grid(method: str, entries: Sequence[str] | None) -> Grid:
         return {name: tuple(values) for name, values in DEFAULT_GRIDS[method].items()}
     cls = PARAMS_CLASSES[method]
     defaults = {f.name: getattr(cls(), f.name) for f in dataclasses.fields(cls)}
-    sweepable = [n for n, v in defaults.items() if isinstance(v, bool | int | float)]
+    sweepable = [n for n, v in defaults.items() if v is None or isinstance(v, bool | int | float)]
     grid: Grid = {}
     for entry in entries:
         where = f"--grid {entry!r}"
@@ -149,10 +159,20 @@ def combinations(grid: Grid) -> list[dict]:
             for values in itertools.product(*(grid[n] for n in names))]  # fmt: skip
 
 
-def combination_label(method: str, combination: Mapping) -> str:
-    """The combination's key in ``sweep.csv``, e.g. ``stucco[eps=0.05 min_samples=1]``."""
+def combination_label(method: str, combination: Mapping, dx_model: str = "ee") -> str:
+    """The combination's key in ``sweep.csv``, e.g. ``dbscan[eps=0.05 min_samples=1]``; a
+    contact-motion model other than the paper's is named after the method, e.g.
+    ``stucco@normal[length=0.02]``, so runs of the two models never stand for each other."""
     inner = " ".join(f"{name}={combination[name]!r}" for name in sorted(combination))
-    return f"{method}[{inner}]"
+    model = "" if dx_model == "ee" else f"@{dx_model}"
+    return f"{method}{model}[{inner}]"
+
+
+def tuned_path(out: Path, method: str, dx_model: str = "ee") -> Path:
+    """``OUT/tuned_<method>.yaml``, or ``OUT/tuned_<method>_<dx_model>.yaml`` off the paper's
+    contact motion."""
+    return Path(out) / (f"tuned_{method}.yaml" if dx_model == "ee"
+                        else f"tuned_{method}_{dx_model}.yaml")  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------- running
@@ -167,13 +187,15 @@ def kept_trials(out: Path, trials: Sequence[tuple[str, int]]) -> list[tuple[str,
 
 
 def replay_combination(task: tuple[str, int, str], out: str, method: str,
-                       combos: Mapping[str, dict], sources: Sources) -> dict:
+                       combos: Mapping[str, dict], sources: Sources,
+                       dx_model: str = "ee") -> dict:  # fmt: skip
     """One sweep run (scene, seed, combination label) replayed from its cached log, with the
     scene source's pxpen (runs in a worker); its row's ``method`` is the label."""
     scene, seed, label = task
     log, source = load_cached_log(out, scene, seed), sources[scene]
     row = replay(log, method, params=combos[label],
-                 penetration=source.penetration_for(log, method))
+                 penetration=replay_penetration(source, log, method, dx_model),
+                 dx_model=dx_model)
     return {**row, "method": label}
 
 
@@ -187,14 +209,15 @@ def _medians(rows: list[dict]) -> dict:
     return {"n_runs": len(rows), "median_fmi": median("fmi"), "median_ce_cm": median("ce_cm")}
 
 
-def summarize(rows: Sequence[dict], method: str, combos: Sequence[dict]) -> list[dict]:
+def summarize(rows: Sequence[dict], method: str, combos: Sequence[dict],
+              dx_model: str = "ee") -> list[dict]:  # fmt: skip
     """Per combination: its params, medians over all rows and over ambiguous rows."""
     by_label = {}
     for row in rows:
         by_label.setdefault(row["method"], []).append(row)
     summary = []
     for combo in combos:
-        mine = by_label.get(combination_label(method, combo), [])
+        mine = by_label.get(combination_label(method, combo, dx_model), [])
         ambiguous = [r for r in mine if np.isfinite(r["ambiguity"]) and r["ambiguity"] >= AMBIGUOUS]
         summary.append({"params": dict(combo), **_medians(mine), "ambiguous": _medians(ambiguous)})
     return summary
@@ -221,13 +244,15 @@ def _plain(value):
 
 
 def write_tuned(path: Path, method: str, best: dict, summary: Sequence[dict], scenes,
-                n_trials: int, n_kept: int) -> dict:
-    """Writes the tuned document to ``path`` and returns it: the method, its full tuned
-    ``params`` (every field, loadable by its ``from_mapping``), the ``swept`` values, their
-    medians (FMI; CE in cm) over all kept trials and over the ambiguous ones, the trial
-    counts (over all scenes) and the summary of every combination."""
+                n_trials: int, n_kept: int, dx_model: str = "ee") -> dict:  # fmt: skip
+    """Writes the tuned document to ``path`` and returns it: the method, the contact-motion
+    model replayed, its full tuned ``params`` (every field, loadable by its
+    ``from_mapping``), the ``swept`` values, their medians (FMI; CE in cm) over all kept
+    trials and over the ambiguous ones, the trial counts (over all scenes) and the summary of
+    every combination."""
     document = _plain({
         "method": method,
+        "dx_model": dx_model,
         "params": dataclasses.asdict(make_params(method, best["params"])),
         "swept": best["params"],
         "selection": "max median FMI, then min median CE (cm), over all kept trials",
@@ -256,16 +281,20 @@ def run_sweep(
     grid: Grid | None = None,
     sources: Sources = SYNTHETIC_SOURCES,
     progress=None,
+    dx_model: str = "ee",
 ) -> dict:
     """Simulate trials 0..trials-1 of every scene (cached), replay every combination of
-    ``grid`` (default :data:`DEFAULT_GRIDS`) on each kept trial, pick and write the tuned
-    parameters. Returns the tuned document (see :func:`write_tuned`).
+    ``grid`` (default :data:`DEFAULT_GRIDS`) on each kept trial with the contact motion
+    ``dx_model`` (see :func:`~stucco_drake.eval.replay.replay`), pick and write the tuned
+    parameters to :func:`tuned_path`. Returns the tuned document (see :func:`write_tuned`).
 
     Raises:
         ValueError: unknown scene or method, trials < 1, no kept trial.
         RunInterrupted: a simulation or replay failed; what finished is kept (rerun resumes).
     """
     check_names(scenes, [method], sources)
+    if dx_model not in DX_MODELS:
+        raise ValueError(f"dx_model: expected one of {DX_MODELS}, got {dx_model!r}")
     if trials < 1:
         raise ValueError(f"trials must be positive, got {trials}")
     grid = parse_grid(method, None) if grid is None else grid
@@ -276,15 +305,15 @@ def run_sweep(
     if not kept:
         raise ValueError(f"all {len(wanted)} trials are discarded: nothing to tune on")
     combos = combinations(grid)
-    labels = {combination_label(method, c): c for c in combos}
+    labels = {combination_label(method, c, dx_model): c for c in combos}
     results = RunResults(out / "sweep.csv")
     task = functools.partial(replay_combination, out=str(out), method=method, combos=labels,
-                             sources=dict(sources))
+                             sources=dict(sources), dx_model=dx_model)
     run_table([(scene, seed, label) for label in labels for scene, seed in kept], task, results,
               executor, progress)
     keys = {(scene, seed, label) for label in labels for scene, seed in kept}
     rows = [r for r in results.rows() if (r["scene"], r["seed"], r["method"]) in keys]
-    summary = summarize(rows, method, combos)
+    summary = summarize(rows, method, combos, dx_model)
     best = best_combination(summary)
-    return write_tuned(out / f"tuned_{method}.yaml", method, best, summary, scenes, len(wanted),
-                       len(kept))
+    return write_tuned(tuned_path(out, method, dx_model), method, best, summary, scenes,
+                       len(wanted), len(kept), dx_model)  # fmt: skip
