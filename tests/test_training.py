@@ -11,7 +11,13 @@ import yaml
 from stucco_drake.cli import main
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec
 from stucco_drake.eval.sources import EpisodeSource
-from stucco_drake.eval.sweep import best_combination, combination_label, parse_grid, run_sweep
+from stucco_drake.eval.sweep import (
+    best_combination,
+    combination_label,
+    parse_grid,
+    run_sweep,
+    training_summary,
+)
 from stucco_drake.eval.synthetic_episode import synthetic_episode
 from stucco_drake.scenes import load_scene
 from stucco_drake.training import (
@@ -260,3 +266,11 @@ def test_sweep_under_the_normal_contact_motion_keeps_its_own_runs(tmp_path):
         assert tuned["n_runs"] == 1 and 0.0 <= tuned["median_fmi"] <= 1.0
         assert [c["params"] for c in tuned["combinations"]] == [
             {"touched_side_margin": None}, {"touched_side_margin": 0.002}]
+    # Fig. 4: both tuned combinations, each with its one run, side by side.
+    entries = training_summary(tmp_path)
+    assert [(e["name"], len(e["rows"])) for e in entries] == [("stucco", 1), ("stucco@normal", 1)]
+    assert entries[1]["rows"][0]["method"] == combination_label(
+        "stucco", runs["normal"]["swept"], "normal")
+    table = (tmp_path / "tuned.md").read_text().splitlines()
+    assert len(table) == 2 + 2 and "| ours (STUCCO) | normal | touched_side_margin = " in table[3]
+    assert (tmp_path / "fmi_ce.png").stat().st_size > 10_000

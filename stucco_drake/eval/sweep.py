@@ -10,7 +10,8 @@ label, e.g. ``stucco[length=0.02]``), so a rerun skips what is done. The tuned c
 maximises the median FMI over all kept trials and, among equal medians, minimises the median
 CE; it is written to ``OUT/tuned_<method>.yaml`` (``tuned_<method>_<dx_model>.yaml`` under a
 contact motion other than the paper's) with both medians overall and on the ambiguous trials
-(ambiguity >= :data:`AMBIGUOUS`).
+(ambiguity >= :data:`AMBIGUOUS`). ``OUT/fmi_ce.png`` and ``OUT/tuned.md`` then compare the
+tuned combinations of every sweep done in ``OUT`` (the paper's Fig. 4).
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ from stucco_drake.eval.replay import replay
 from stucco_drake.eval.results import RunResults
 from stucco_drake.eval.runner import run_table
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
+from stucco_drake.eval.table import METHOD_LABELS, plot_fmi_ce
 
 #: A trial is ambiguous when its ambiguity is at least this (paper Sec. V-B, Fig. 4 bottom).
 AMBIGUOUS = 0.3
@@ -272,6 +274,46 @@ def write_tuned(path: Path, method: str, best: dict, summary: Sequence[dict], sc
     return document
 
 
+def training_summary(out) -> list[dict]:
+    """The paper's Fig. 4 from every sweep done in ``out``: each ``tuned_*.yaml``'s tuned
+    combination, its runs (from ``sweep.csv``, on that sweep's trials) plotted as FMI against
+    CE (cm) into ``OUT/fmi_ce.png`` (all runs; runs of ambiguity >= :data:`AMBIGUOUS`) and
+    its medians listed in ``OUT/tuned.md``. Returns one entry per tuned file: ``name`` (the
+    method, with ``@<dx_model>`` off the paper's contact motion), ``doc`` and ``rows``."""
+    out = Path(out)
+    results = RunResults(out / "sweep.csv").rows() if (out / "sweep.csv").exists() else []
+    entries = []
+    for path in sorted(out.glob("tuned_*.yaml")):
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+        dx_model = doc.get("dx_model", "ee")
+        label = combination_label(doc["method"], doc["swept"], dx_model)
+        per_scene = doc["n_trials"] // max(len(doc["scenes"]), 1)
+        rows = [r for r in results if r["method"] == label and r["scene"] in doc["scenes"]
+                and r["seed"] < per_scene]  # fmt: skip
+        name = label.split("[")[0]
+        entries.append({"name": name, "doc": doc, "rows": rows})
+    if not entries:
+        return entries
+    plot_fmi_ce([{**r, "method": e["name"], "scene": "training set"}
+                 for e in entries for r in e["rows"]], out / "fmi_ce.png",
+                min_ambiguity=AMBIGUOUS)  # fmt: skip
+    lines = [
+        "| method | contact motion | tuned | runs | median FMI | median CE (cm) "
+        f"| runs, ambiguity >= {AMBIGUOUS:g} | median FMI | median CE (cm) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for e in entries:
+        doc, amb = e["doc"], e["doc"]["ambiguous"]
+        swept = ", ".join(f"{k} = {v}" for k, v in doc["swept"].items())
+        lines.append(
+            f"| {METHOD_LABELS.get(doc['method'], doc['method'])} | {doc.get('dx_model', 'ee')} "
+            f"| {swept} | {doc['n_runs']} | {doc['median_fmi']:.3f} | {doc['median_ce_cm']:.2f} "
+            f"| {amb['n_runs']} | {amb['median_fmi']:.3f} | {amb['median_ce_cm']:.2f} |"
+        )
+    (out / "tuned.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return entries
+
+
 def run_sweep(
     method: str,
     scenes: Sequence[str],
@@ -286,7 +328,8 @@ def run_sweep(
     """Simulate trials 0..trials-1 of every scene (cached), replay every combination of
     ``grid`` (default :data:`DEFAULT_GRIDS`) on each kept trial with the contact motion
     ``dx_model`` (see :func:`~stucco_drake.eval.replay.replay`), pick and write the tuned
-    parameters to :func:`tuned_path`. Returns the tuned document (see :func:`write_tuned`).
+    parameters to :func:`tuned_path`, and redraw :func:`training_summary` over every sweep
+    done in ``out``. Returns the tuned document (see :func:`write_tuned`).
 
     Raises:
         ValueError: unknown scene or method, trials < 1, no kept trial.
@@ -315,5 +358,7 @@ def run_sweep(
     rows = [r for r in results.rows() if (r["scene"], r["seed"], r["method"]) in keys]
     summary = summarize(rows, method, combos, dx_model)
     best = best_combination(summary)
-    return write_tuned(tuned_path(out, method, dx_model), method, best, summary, scenes,
-                       len(wanted), len(kept), dx_model)  # fmt: skip
+    tuned = write_tuned(tuned_path(out, method, dx_model), method, best, summary, scenes,
+                        len(wanted), len(kept), dx_model)  # fmt: skip
+    training_summary(out)
+    return tuned
