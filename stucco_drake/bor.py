@@ -134,8 +134,9 @@ class PosedSurface:
 
 
 def object_surfaces(built: BuiltScene, plant_context) -> dict[str, list[PosedSurface]]:
-    """name -> the collision surfaces of every object standing on the table (free objects and
-    walls; not the table itself) at the poses in ``plant_context``, for the contact error."""
+    """name -> the collision surfaces of every object (every free body, and the welded walls
+    standing on the table; not the table itself) at the poses in ``plant_context``, for the
+    contact error. A free object is listed wherever it is, even pushed off the table."""
     surfaces = {}
     for name, body in {**built.free_bodies, **built.welded_bodies}.items():
         X_WB = body.EvalPoseInWorld(plant_context)
@@ -143,8 +144,10 @@ def object_surfaces(built: BuiltScene, plant_context) -> dict[str, list[PosedSur
             PosedSurface(sdf, X_WB.multiply(X_BG).inverse().GetAsMatrix4())
             for sdf, X_BG in collision_shapes(built.plant, built.scene_graph, body)
         ]
-        # The table (its top at z = 0, its centre below) is no object the robot rummages among.
-        if posed and max(np.linalg.inv(s.X_GW)[2, 3] for s in posed) > 0.0:
+        # The table (welded, its top at z = 0, its centre below) is no object the robot
+        # rummages among.
+        if posed and (name in built.free_bodies
+                      or max(np.linalg.inv(s.X_GW)[2, 3] for s in posed) > 0.0):  # fmt: skip
             surfaces[name] = posed
     return surfaces
 

@@ -308,3 +308,23 @@ def test_push_force_cap_holds_a_blocked_gripper_back(cap):
         assert min(forces) > 2.5 * 30.0, forces
     else:
         assert all(0.6 * cap < f < 1.2 * cap for f in forces), forces
+
+
+def test_object_pushed_off_the_table_is_still_an_object():
+    """A free object counts wherever it is (a training trial once pushed one off the table,
+    and the log's per-object records then lost it); the table itself never counts."""
+    from pydrake.math import RigidTransform
+
+    from stucco_drake.bor import object_surfaces
+
+    built = build_scene(load_scene("SELECT3"))
+    context = built.diagram.CreateDefaultContext()
+    plant_context = built.plant.GetMyContextFromRoot(context)
+    before = object_surfaces(built, plant_context)
+    assert set(built.free_bodies) <= set(before) and "table" not in before
+    body = built.free_bodies["heavy_cylinder"]
+    built.plant.SetFreeBodyPose(plant_context, body, RigidTransform([1.5, -1.0, -0.6]))
+    after = object_surfaces(built, plant_context)
+    assert list(after) == list(before)
+    # Its surface moved with it: the body's new centre lies inside it, 7.5 cm deep.
+    assert after["heavy_cylinder"][0]([[1.5, -1.0, -0.6]])[0] == pytest.approx(-0.075, abs=1e-9)
