@@ -7,8 +7,9 @@ contact, a random walk of :data:`WALK_LENGTH` uniform actions (restarted by each
 until the gripper is within :data:`DIST_FOR_DONE` of the goal or :data:`MAX_ACTIONS` actions
 are played. :func:`record_trial` logs it as an :class:`~stucco_drake.eval.episode_log.EpisodeLog`
 (the same recorder as the BOR episodes); a trial in contact during fewer than
-:data:`MIN_CONTACT_FRACTION` of its actions is marked discarded (``info["discarded"]``) and the
-training set skips it.
+:data:`MIN_CONTACT_FRACTION` of its actions, or in which the simulation flung an object (see
+:data:`MAX_OBJECT_STEP`), is marked discarded (``info["discarded"]``) and the training set
+skips it.
 
 What follows the authors' code (``collect_tracking_training_data.py``, see the experiment
 notes, Sec. 2.4) and what is adapted to an arm on a pedestal:
@@ -62,6 +63,11 @@ MAX_ACTIONS = 300
 MIN_SEPARATION = 0.7
 #: Trials in contact during fewer than this fraction of their actions are discarded.
 MIN_CONTACT_FRACTION = 0.05
+#: Trials in which an object moved farther than this in one action (m) are discarded: a push
+#: of at most one step (0.03 m) carries an object at most a few centimetres (the BOR and
+#: training episodes move one by at most 0.05 m an action), so such a jump is the simulation
+#: flinging an object squeezed between the arm and a wall, not a motion to track.
+MAX_OBJECT_STEP = 0.1
 #: Least distance (m) from the gripper's surface to any object at the start and the goal.
 CLEARANCE = 0.02
 #: Angle (rad) by which a greedy step that would leave the reachable region is turned.
@@ -201,7 +207,13 @@ def contact_fraction(log: EpisodeLog) -> float:
 def discard_reason(log: EpisodeLog, min_contact_fraction: float = MIN_CONTACT_FRACTION) -> str:
     """Why a trial is left out of the training set ("" to keep it): in contact (at least one
     contact point) during fewer than ``min_contact_fraction`` of its actions, or in fewer than
-    two actions."""
+    two actions, or an object flung (moved more than :data:`MAX_OBJECT_STEP` in one action)."""
+    if log.n_actions and log.object_poses.shape[1]:
+        step = np.linalg.norm(np.diff(log.object_poses[:, :, :2], axis=0), axis=2)
+        action, k = np.unravel_index(int(np.argmax(step)), step.shape)
+        if step[action, k] > MAX_OBJECT_STEP:
+            return (f"{log.object_names[k]} moved {step[action, k]:.2f} m in action {action} "
+                    f"(> {MAX_OBJECT_STEP} m: flung by the simulation)")
     fraction = contact_fraction(log)
     if fraction < min_contact_fraction:
         return (f"in contact during {fraction:.1%} of {log.n_actions} actions "

@@ -136,6 +136,11 @@ def test_discard_rule():
     assert "2.5%" in discard_reason(_log_with_contacts(40, [3]))  # 1 of 40 < 5 %
     assert discard_reason(_log_with_contacts(40, [3, 9])) == ""  # 5 %: kept
     assert "only 1" in discard_reason(_log_with_contacts(10, [3]))  # 10 %, but one contact
+    flung = _log_with_contacts(40, [3, 9])
+    flung.object_poses[30:, 0, 0] = 0.12  # 12 cm in action 29: flung
+    assert discard_reason(flung) == "a moved 0.12 m in action 29 (> 0.1 m: flung by the simulation)"
+    flung.object_poses[30:, 0, 0] = 0.05  # 5 cm: a hard push, kept
+    assert discard_reason(flung) == ""
     log = _log_with_contacts(40, [3])
     assert not is_discarded(log)
     log.info["discarded"] = True
