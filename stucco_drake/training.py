@@ -49,7 +49,7 @@ from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.sources import EpisodeSource
 from stucco_drake.scenes import SceneFile, build_scene, load_scene
 from stucco_drake.systems.gripper_samples import sample_gripper_surface
-from stucco_drake.systems.planar_controller import gripper_rotation
+from stucco_drake.systems.planar_controller import StartUnreachable, gripper_rotation
 
 #: The paper's training scenes.
 TRAINING_SCENES = ("SELECT1", "SELECT2", "SELECT3", "SELECT4")
@@ -68,6 +68,8 @@ MIN_CONTACT_FRACTION = 0.05
 #: training episodes move one by at most 0.05 m an action), so such a jump is the simulation
 #: flinging an object squeezed between the arm and a wall, not a motion to track.
 MAX_OBJECT_STEP = 0.1
+#: Start/goal draws tried before giving up when the arm cannot reach the drawn start.
+_START_DRAWS = 20
 #: Least distance (m) from the gripper's surface to any object at the start and the goal.
 CLEARANCE = 0.02
 #: Angle (rad) by which a greedy step that would leave the reachable region is turned.
@@ -240,7 +242,8 @@ def record_trial(
             and the random walk their generators; the BOR Diagram (tracker, CPF) gets ``seed``.
         max_actions: most actions played.
         method: the BOR Diagram's live tracker (the log does not depend on it).
-        plan: start and goal (default: drawn by :func:`plan_trial`).
+        plan: start and goal (default: drawn by :func:`plan_trial`, again while the arm
+            cannot reach the drawn start).
 
     Returns:
         The log; ``info`` holds the plan, whether the goal was reached, the fraction of actions
@@ -248,10 +251,21 @@ def record_trial(
     """
     base = load_scene(scene) if isinstance(scene, str) else scene
     plan_rng, walk_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
-    plan = plan_trial(base, plan_rng) if plan is None else plan
-    start = dataclasses.replace(base.gripper_start, xy=list(plan.start))
-    scene = with_target(dataclasses.replace(base, gripper_start=start, actions=[]))
-    bor = build_bor_diagram(scene, method, seed, external_actions=True)
+    drawn = plan is None
+    for _ in range(_START_DRAWS):
+        plan = plan_trial(base, plan_rng) if drawn else plan
+        start = dataclasses.replace(base.gripper_start, xy=list(plan.start))
+        scene = with_target(dataclasses.replace(base, gripper_start=start, actions=[]))
+        try:
+            bor = build_bor_diagram(scene, method, seed, external_actions=True)
+            break
+        except StartUnreachable:
+            # Within reach by distance, but the wrist's limits forbid the gripper's fixed yaw
+            # there: draw another start and goal from the same generator.
+            if not drawn:
+                raise
+    else:
+        raise RuntimeError(f"{base.name}: no reachable start in {_START_DRAWS} draws")
     simulator = make_bor_simulator(bor)
     context = simulator.get_mutable_context()
     recorder = EpisodeRecorder(bor, context)

@@ -88,10 +88,15 @@ def _ik_velocity(J: np.ndarray, V: np.ndarray, q: np.ndarray, q_nominal: np.ndar
     return J_pinv @ V + null @ (_NULL_GAIN * (q_nominal - q))
 
 
+class StartUnreachable(RuntimeError):
+    """The arm cannot put the gripper at the requested start pose (its IK did not converge)."""
+
+
 def solve_start_ik(kin: ArmKinematics, q_full: np.ndarray, X_des: RigidTransform,
                    q_nominal: np.ndarray, *, tol: float = 1e-7, max_iter: int = 300):
     """Arm positions (rad) putting the gripper frame at ``X_des``, by Newton steps from
-    ``q_nominal``; the other robot positions are taken from ``q_full``. Raises if it fails."""
+    ``q_nominal``; the other robot positions are taken from ``q_full``. Raises
+    :class:`StartUnreachable` if it fails."""
     q_full = np.array(q_full, dtype=float)
     q = np.array(q_nominal, dtype=float)
     for _ in range(max_iter):
@@ -105,7 +110,7 @@ def solve_start_ik(kin: ArmKinematics, q_full: np.ndarray, X_des: RigidTransform
         pull_to = q_nominal if np.linalg.norm(error) > 1e-3 else q
         step = _ik_velocity(kin.jacobian(), error, q, pull_to) * 0.5
         q = np.clip(q + step, kin.q_lower, kin.q_upper)
-    raise RuntimeError(f"start IK did not converge: pose error {np.linalg.norm(error):.2e}")
+    raise StartUnreachable(f"start IK did not converge: pose error {np.linalg.norm(error):.2e}")
 
 
 def _min_jerk(s: float) -> tuple[float, float]:
