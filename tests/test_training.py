@@ -20,6 +20,7 @@ from stucco_drake.eval.sweep import (
 )
 from stucco_drake.eval.synthetic_episode import synthetic_episode
 from stucco_drake.scenes import load_scene
+from stucco_drake.systems.planar_controller import StartUnreachable
 from stucco_drake.training import (
     WALK_LENGTH,
     ClearanceCheck,
@@ -279,3 +280,17 @@ def test_sweep_under_the_normal_contact_motion_keeps_its_own_runs(tmp_path):
     table = (tmp_path / "tuned.md").read_text().splitlines()
     assert len(table) == 2 + 2 and "| ours (STUCCO) | normal | touched_side_margin = " in table[3]
     assert (tmp_path / "fmi_ce.png").stat().st_size > 10_000
+
+
+def test_unreachable_start_is_drawn_again():
+    """SELECT2 seed 3 first draws a start straight behind the arm's base (joint 1 stops at
+    170 degrees): the trial draws again from the same generator instead of failing."""
+    scene = load_scene("SELECT2")
+    first = plan_trial(scene, np.random.default_rng(np.random.SeedSequence(3).spawn(2)[0]))
+    with pytest.raises(StartUnreachable, match="start IK did not converge"):
+        record_trial(scene, 3, max_actions=1, plan=first)  # a given plan is never redrawn
+    log = record_trial(scene, 3, max_actions=1)
+    start = log.info["trial"]["start"]
+    assert np.linalg.norm(np.subtract(start, first.start)) > 0.1
+    # It did start there: after one action of at most 3 cm per axis, within 4.3 cm of it.
+    assert np.linalg.norm(log.ee_position[0, :2] - start) < 0.043
