@@ -48,10 +48,11 @@ from stucco_drake.eval.replay import replay
 from stucco_drake.eval.results import RunResults
 from stucco_drake.eval.runner import run_table
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
-from stucco_drake.eval.table import METHOD_LABELS, plot_fmi_ce
+from stucco_drake.eval.table import AMBIGUOUS_RUN, METHOD_LABELS, plot_fmi_ce
 
-#: A trial is ambiguous when its ambiguity is at least this (paper Sec. V-B, Fig. 4 bottom).
-AMBIGUOUS = 0.3
+#: A trial is ambiguous when its ambiguity is at least this (paper Sec. V-B, Fig. 4 bottom;
+#: the same threshold as the test table's plot).
+AMBIGUOUS = AMBIGUOUS_RUN
 #: Each method's parameter dataclass (its fields are what a grid may sweep).
 PARAMS_CLASSES = {
     "stucco": SoftTrackingParams,
