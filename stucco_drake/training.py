@@ -260,8 +260,8 @@ def record_trial(
             bor = build_bor_diagram(scene, method, seed, external_actions=True)
             break
         except StartUnreachable:
-            # Within reach by distance, but the wrist's limits forbid the gripper's fixed yaw
-            # there: draw another start and goal from the same generator.
+            # Within reach by distance, but a joint limit forbids it (joint 1 stops at 170
+            # degrees, so straight behind the base is out): draw again from the same generator.
             if not drawn:
                 raise
     else:
