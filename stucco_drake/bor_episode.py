@@ -13,7 +13,6 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from stucco_drake.bor import BorDiagram, build_bor_diagram, object_surfaces
-from stucco_drake.core.grasp_yaw import cylinder_grasp_yaw
 from stucco_drake.core.metrics import contact_error, fowlkes_mallows
 from stucco_drake.scenes import SceneFile, load_scene
 from stucco_drake.scenes.builder import yaw_of
@@ -30,24 +29,16 @@ _PIPELINE_STEPS = 5
 
 def executor_grasp(bor: BorDiagram, simulator: Simulator, estimate):
     """The grasp hook of the BOR task: grasp at the estimated target pose with
-    :func:`stucco_drake.grasp.execute_grasp` (which continues from the simulator's state in a
-    scene of its own); a cylinder is closed on away from the other segments' points
-    (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaw`). Without an estimate there is
-    nothing to grasp: returns False."""
-    from stucco_drake.grasp import execute_grasp
+    :func:`stucco_drake.grasp.grasp_estimate` (which continues from the simulator's state in a
+    scene of its own). Without an estimate there is nothing to grasp: returns False."""
+    from stucco_drake.grasp import grasp_estimate
 
     if estimate is None:
         return False
-    context = simulator.get_context()
-    tracking = bor.tracking.GetMyContextFromRoot(context)
+    tracking = bor.tracking.GetMyContextFromRoot(simulator.get_context())
     points = bor.tracking.GetOutputPort("map_points").Eval(tracking)
-    labels = np.asarray(bor.tracking.GetOutputPort("segment_labels").Eval(tracking))
-    plant_context = bor.scene.plant.GetMyContextFromRoot(context)
-    X_WG = bor.scene.gripper_frame().CalcPoseInWorld(plant_context)
-    yaw = cylinder_grasp_yaw((estimate.x, estimate.y), points[~np.isin(labels, estimate.members)],
-                             yaw_of(X_WG.rotation()))  # fmt: skip
-    pose = (estimate.x, estimate.y, estimate.yaw)
-    return execute_grasp(bor.scene, simulator, pose, bor.target_shape, cylinder_yaw=yaw)
+    labels = bor.tracking.GetOutputPort("segment_labels").Eval(tracking)
+    return grasp_estimate(bor.scene, simulator, estimate, points, labels, bor.target_shape)
 
 
 def action_stop_time(scene: SceneFile, k: int) -> float:

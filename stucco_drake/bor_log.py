@@ -21,18 +21,16 @@ import functools
 import math
 
 import numpy as np
-from pydrake.math import RotationMatrix
 from pydrake.systems.analysis import Simulator
 
 from stucco_drake.bor import build_bor_diagram, collision_shapes, object_surfaces, target_shape
 from stucco_drake.bor_episode import make_bor_simulator, run_episode
-from stucco_drake.core.grasp_yaw import cylinder_grasp_yaw
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.target_pose import estimate_target_pose
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sources import EpisodeSource
-from stucco_drake.grasp import build_grasp_scene, execute_grasp
+from stucco_drake.grasp import build_grasp_scene, grasp_estimate
 from stucco_drake.gripper_sdf import gripper_penetration
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import yaw_of
@@ -244,9 +242,7 @@ def grasp_from_log(log: EpisodeLog, tracker):
     gripper's pxpen at the logged end-effector positions since the chosen segment was last
     touched, ``penetration_configs="since_touch"``), with a generator seeded by
     ``[log.seed, 1]``; the grasp then runs in a freshly built grasp scene set to the logged
-    plant state (:func:`~stucco_drake.grasp.execute_grasp`); a cylinder is closed on along the
-    yaw that keeps the fingers off the other segments' points
-    (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaw`). Returns the
+    plant state (:func:`~stucco_drake.grasp.grasp_estimate`). Returns the
     :class:`~stucco_drake.grasp.GraspResult`, or None when no segment can be fitted (no grasp
     is attempted: a failure).
     """
@@ -268,10 +264,7 @@ def grasp_from_log(log: EpisodeLog, tracker):
         built.plant.GetMyMutableContextFromRoot(context), log.final_state
     )
     simulator.Initialize()
-    yaw = cylinder_grasp_yaw((estimate.x, estimate.y), points[~np.isin(labels, estimate.members)],
-                             yaw_of(RotationMatrix(log.ee_rotation[-1])))  # fmt: skip
-    return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw), shape,
-                         cylinder_yaw=yaw)  # fmt: skip
+    return grasp_estimate(built, simulator, estimate, points, labels, shape)
 
 
 def grasp_success(log: EpisodeLog, tracker) -> bool:

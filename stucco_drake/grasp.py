@@ -25,6 +25,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 
+from stucco_drake.core.grasp_yaw import cylinder_grasp_yaws
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.scenes.builder import GRIPPER, IIWA, BuiltScene, build_scene, yaw_of
 from stucco_drake.scenes.scene_file import SceneFile
@@ -55,6 +56,8 @@ class GraspResult:
         final_pose: the target's true (x, y, z, yaw) at the end (m, rad, world).
         reason: why it failed (or "ok"), with the numbers.
         sim_time: simulated duration of the grasp (s); wall_time: its wall-clock time (s).
+        attempts: descents made (more than one when a descent was blocked and another
+            closing yaw was tried).
     """
 
     success: bool
@@ -64,6 +67,7 @@ class GraspResult:
     reason: str
     sim_time: float = 0.0
     wall_time: float = 0.0
+    attempts: int = 1
 
 
 def build_grasp_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = True,
@@ -199,6 +203,24 @@ def _finger_positions(built: BuiltScene, plant_context) -> tuple[float, float]:
                  for name in ("left_finger_joint", "right_finger_joint"))
 
 
+def grasp_estimate(built: BuiltScene, simulator: Simulator, estimate, points, labels,
+                   target_shape) -> GraspResult:
+    """:func:`execute_grasp` at a :class:`~stucco_drake.core.target_pose.TargetPoseEstimate`.
+
+    A cylinder is closed on first along the yaw that keeps the open fingers off the tracked
+    points of the other segments (``points``, (n, 3) m world, with segment ``labels``), then
+    along the other axes (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaws`).
+    """
+    context = simulator.get_context()
+    X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
+    labels = np.asarray(labels)
+    yaws = cylinder_grasp_yaws((estimate.x, estimate.y),
+                               np.asarray(points)[~np.isin(labels, estimate.members)],
+                               yaw_of(X_WG.rotation()))  # fmt: skip
+    return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw),
+                         target_shape, cylinder_yaws=yaws)  # fmt: skip
+
+
 def _grasp_context(built: BuiltScene, simulator: Simulator):
     """(built, simulator) holding a GraspExecutor, at the given simulator's state.
 
@@ -220,7 +242,7 @@ def _grasp_context(built: BuiltScene, simulator: Simulator):
 
 
 def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_shape, *,
-                  min_lift: float = 0.05, cylinder_yaw: float | None = None) -> GraspResult:
+                  min_lift: float = 0.05, cylinder_yaws=None) -> GraspResult:
     """Grasps at ``target_pose`` (RigidTransform X_WO or (x, y, yaw); m, rad, world) a target of
     ``target_shape`` (BoxSdf / CylinderSdf in the target's frame) and lifts it 10 cm.
 
@@ -228,8 +250,10 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     :func:`build_grasp_scene` it continues that simulation in place; otherwise the plant's
     state is copied into a freshly built grasp scene (the given simulator is left untouched).
     The target's true pose comes from the plant (model ``scene.target``). A cylinder can be
-    grasped at any yaw: ``cylinder_yaw`` (rad, world; default the gripper's current yaw) picks
-    one, e.g. so the open fingers (0.2 m across, plates included) miss known clutter.
+    grasped at any yaw: ``cylinder_yaws`` (rad, world; default the gripper's current yaw alone)
+    are the closing yaws to try in turn, e.g. so the open fingers (0.2 m across, plates
+    included) miss known clutter; the next is tried when a descent is blocked (see
+    :class:`GraspExecutor`). A box is closed on across its short side only.
     A target that is not between the fingers once they have closed fails there: the lift and
     hold are not simulated (``sim_time`` is then shorter).
     """
@@ -245,13 +269,18 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     plant_context = plant.GetMyContextFromRoot(context)
     z_before = target.EvalPoseInWorld(plant_context).translation()[2]
     X_WG = built.gripper_frame().CalcPoseInWorld(plant_context)
-    yaw_now = yaw_of(X_WG.rotation()) if cylinder_yaw is None else cylinder_yaw
-    x, y, yaw, z_grasp = grasp_pose(target_pose, target_shape, yaw_now)
-    executor.start(executor.GetMyMutableContextFromRoot(context), (x, y), yaw,
-                   SAFE_HEIGHT, z_grasp)
+    yaws = [yaw_of(X_WG.rotation())] if cylinder_yaws is None else list(cylinder_yaws)
+    x, y, yaw, z_grasp = grasp_pose(target_pose, target_shape, yaws[0])
+    retry_yaws = yaws[1:] if isinstance(target_shape, CylinderSdf) else ()
+    executor_context = executor.GetMyMutableContextFromRoot(context)
+    executor.start(executor_context, (x, y), yaw, SAFE_HEIGHT, z_grasp, retry_yaws=retry_yaws)
     t0, wall0 = context.get_time(), time.perf_counter()
 
-    simulator.AdvanceTo(t0 + executor.phase_end("close"))
+    # A blocked descent starts a new attempt, which restarts the phase clock.
+    attempt = -1
+    while attempt != executor.attempt(executor_context)[0]:
+        attempt, t_attempt = executor.attempt(executor_context)
+        simulator.AdvanceTo(t_attempt + executor.phase_end("close"))
     plant_context = plant.GetMyContextFromRoot(context)
     geometric_ok, geometry = geometric_check(
         target.EvalPoseInWorld(plant_context),
@@ -263,7 +292,7 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
                                 target.EvalPoseInWorld(plant_context).translation(),
                                 _finger_positions(built, plant_context))
     if closed_on:
-        simulator.AdvanceTo(t0 + executor.total_duration)
+        simulator.AdvanceTo(t_attempt + executor.total_duration)
     plant_context = plant.GetMyContextFromRoot(context)
     X_WO = target.EvalPoseInWorld(plant_context)
     X_WG = built.gripper_frame().CalcPoseInWorld(plant_context)
@@ -283,4 +312,4 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
         success=success, lift_height=lift, geometric_ok=geometric_ok,
         final_pose=np.array([*X_WO.translation(), yaw_of(X_WO.rotation())]),
         reason=f"{reason} (geometry: {geometry})", sim_time=context.get_time() - t0,
-        wall_time=time.perf_counter() - wall0)
+        wall_time=time.perf_counter() - wall0, attempts=attempt + 1)

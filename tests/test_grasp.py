@@ -48,9 +48,23 @@ def test_fb_pose_10cm_off_fails():
 def test_tc_true_pose_lifts_the_can():
     # Closing along world y (the start yaw) would put the open fingers' plates on the master
     # chef can and the cracker box beside the target; -0.5 rad clears both.
-    result = _grasp("TC", TOMATO_CAN, cylinder_yaw=-0.5)
+    result = _grasp("TC", TOMATO_CAN, cylinder_yaws=[-0.5])
     assert result.success, result.reason
     assert result.geometric_ok, result.reason
+    assert result.attempts == 1
+
+
+def test_tc_blocked_descent_tries_the_next_yaw():
+    """Along world y the open fingers land on the master chef can and the cracker box, and
+    the descent stops short: the executor rises and tries the next axis, 60 deg round, which
+    lifts the can. With that one yaw only, the grasp fails."""
+    result = _grasp("TC", TOMATO_CAN, cylinder_yaws=[np.pi / 2, np.pi / 2 + np.pi / 3])
+    assert result.attempts == 2, result.reason
+    assert result.success, result.reason
+    assert result.geometric_ok, result.reason
+    blocked = _grasp("TC", TOMATO_CAN, cylinder_yaws=[np.pi / 2])
+    assert blocked.attempts == 1
+    assert not blocked.success
 
 
 def test_geometric_check_box_and_can():

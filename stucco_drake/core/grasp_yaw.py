@@ -39,16 +39,54 @@ def cylinder_grasp_yaw(
         obstacle_points: (n, 2 or 3) points on other objects (m, world; z ignored).
         current_yaw: the gripper's yaw now (rad).
     """
-    centre = as_finite_array(centre_xy, "centre_xy", (2,))
-    points = np.asarray(obstacle_points, dtype=np.float64)
-    if points.size == 0:
+    centre, points = _checked(centre_xy, obstacle_points)
+    if len(points) == 0:
         return float(current_yaw)
-    points = as_finite_array(points.reshape(len(points), -1)[:, :2], "obstacle_points", (None, 2))
     yaws = float(current_yaw) + np.pi * np.arange(n_yaws) / n_yaws
-    axes = np.stack([np.cos(yaws), np.sin(yaws)], axis=1)
-    fingers = centre + finger_offset * np.stack([axes, -axes], axis=1)  # (n_yaws, 2, 2)
-    distance = np.linalg.norm(fingers[:, :, None, :] - points[None, None], axis=-1)
-    score = distance.min(axis=(1, 2))
+    score = _clearance(centre, points, yaws, finger_offset)
     if score[0] >= clearance:
         return float(current_yaw)
     return float(yaws[int(np.argmax(score))])
+
+
+def cylinder_grasp_yaws(
+    centre_xy,
+    obstacle_points,
+    current_yaw: float,
+    *,
+    n_axes: int = 3,
+    finger_offset: float = OPEN_FINGER_OFFSET,
+    **kwargs,
+) -> np.ndarray:
+    """Closing yaws (rad, world) to try in turn on a cylinder, when a descent is blocked.
+
+    The first is :func:`cylinder_grasp_yaw`'s (``kwargs`` go to it); the other ``n_axes - 1``
+    closing axes are spaced ``pi / n_axes`` from it, the one whose fingers are farther from
+    the obstacle points first (ties: counter-clockwise first). Untouched clutter is not among
+    the points, so a finger can still land on it; the grasp then tries the next axis.
+    """
+    first = cylinder_grasp_yaw(centre_xy, obstacle_points, current_yaw,
+                               finger_offset=finger_offset, **kwargs)  # fmt: skip
+    others = first + np.pi * np.arange(1, n_axes) / n_axes
+    centre, points = _checked(centre_xy, obstacle_points)
+    if len(points):
+        others = others[np.argsort(-_clearance(centre, points, others, finger_offset),
+                                   kind="stable")]  # fmt: skip
+    return np.concatenate([[first], others])
+
+
+def _checked(centre_xy, obstacle_points) -> tuple[np.ndarray, np.ndarray]:
+    centre = as_finite_array(centre_xy, "centre_xy", (2,))
+    points = np.asarray(obstacle_points, dtype=np.float64)
+    if points.size == 0:
+        return centre, np.zeros((0, 2))
+    points = as_finite_array(points.reshape(len(points), -1)[:, :2], "obstacle_points", (None, 2))
+    return centre, points
+
+
+def _clearance(centre, points, yaws, finger_offset: float) -> np.ndarray:
+    """Per yaw, the distance (m) from the nearer open finger's centre to the nearest point."""
+    axes = np.stack([np.cos(yaws), np.sin(yaws)], axis=1)
+    fingers = centre + finger_offset * np.stack([axes, -axes], axis=1)  # (n_yaws, 2, 2)
+    distance = np.linalg.norm(fingers[:, :, None, :] - points[None, None], axis=-1)
+    return distance.min(axis=(1, 2))

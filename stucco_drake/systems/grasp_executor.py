@@ -11,7 +11,10 @@ clock, the phases listed in :data:`PHASES`:
 2. ``open``: open both fingers fully;
 3. ``transit``: move above the grasp point while turning (yaw) to the grasp orientation; the
    height reaches the safe height halfway, so the gripper climbs before it passes over things;
-4. ``descend``: go straight down to the grasp height;
+4. ``descend``: go straight down to the grasp height. The descent is guarded: when the
+   measured gripper height trails the reference by more than ``block_tolerance`` (a finger has
+   landed on something), and :meth:`GraspExecutor.start` was given retry yaws, the sequence
+   starts again from ``raise`` at the measured pose with the next yaw (a new attempt);
 5. ``close``: close the fingers (see ``close_position``: a command beyond the closed stop, so the
    joint controller keeps squeezing once the bubbles touch the object);
 6. ``lift``: raise the gripper by ``lift``;
@@ -49,12 +52,16 @@ DURATIONS = (1.5, 0.6, 2.5, 2.0, 1.2, 2.0, 0.7)
 _DAMPING = 1e-3
 #: Gain (1/s) of the null-space pull towards the posture at start (one redundant DoF).
 _NULL_GAIN = 2.0
-# State layout: mode, t0, q_cmd (7), then the plan: start (x, y, z, yaw), grasp (x, y, yaw),
-# z_safe, z_grasp, finger position at start, q_nominal (7).
+#: Most yaws one grasp tries (the first and its retries).
+MAX_ATTEMPTS = 4
+# State layout: mode, t0 (of the current attempt), q_cmd (7), then the plan: start (x, y, z,
+# yaw), grasp (x, y, yaw), z_safe, z_grasp, finger position at start, q_nominal (7), the height
+# the raise phase reaches, the attempt's index, the number of yaws, the yaws to try.
 _MODE, _T0, _Q = 0, 1, slice(2, 9)
 _START, _GRASP, _ZS, _ZG, _F0, _QN = slice(9, 13), slice(13, 16), 16, 17, 18, slice(19, 26)
-_ZR = 26  # height the raise phase reaches (m)
-_N_STATE = 27
+_ZR, _ATTEMPT, _N_YAWS, _YAWS = 26, 27, 28, slice(29, 29 + MAX_ATTEMPTS)
+_N_STATE = 29 + MAX_ATTEMPTS
+_DESCEND = PHASES.index("descend")
 
 
 def _min_jerk(s: float) -> tuple[float, float]:
@@ -76,15 +83,20 @@ class GraspExecutor(LeafSystem):
             position error, hence the squeeze force, persists once the bubbles touch).
         lift: how far the ``lift`` phase raises the gripper (m).
         durations: phase durations (s), in the order of :data:`PHASES`.
+        block_tolerance: how far (m) the measured gripper height may trail the reference
+            during ``descend`` before the descent counts as blocked. A free descent trails by
+            at most 3 mm (TC's can); a finger landing on a box top, by 9 cm.
     """
 
     def __init__(self, robot_plant, arm_instance, gripper_frame, *, period: float = 0.01,
                  gain: float = 10.0, open_position: float = 0.055,
-                 close_position: float = -0.35, lift: float = 0.1, durations=DURATIONS):
+                 close_position: float = -0.35, lift: float = 0.1, durations=DURATIONS,
+                 block_tolerance: float = 0.015):
         super().__init__()
         self._kin = ArmKinematics(robot_plant, arm_instance, gripper_frame)
         self._nq, self._nv = robot_plant.num_positions(), robot_plant.num_velocities()
         self._period, self._gain = float(period), float(gain)
+        self._block_tolerance = float(block_tolerance)
         self._open, self._close, self._lift = float(open_position), float(close_position), lift
         self._durations = np.asarray(durations, dtype=float)
         if len(self._durations) != len(PHASES):
@@ -114,7 +126,8 @@ class GraspExecutor(LeafSystem):
         """Time (s) from :meth:`start` to the end of phase ``name``."""
         return float(self._ends[PHASES.index(name)])
 
-    def start(self, context, grasp_xy, grasp_yaw: float, z_safe: float, z_grasp: float):
+    def start(self, context, grasp_xy, grasp_yaw: float, z_safe: float, z_grasp: float,
+              retry_yaws=()):
         """Arms the sequence on this system's ``context``, from the measured robot state.
 
         Args:
@@ -123,27 +136,46 @@ class GraspExecutor(LeafSystem):
                 (mod pi, the fingers are symmetric) nearest the current one is used.
             z_safe: height of the gripper frame for the transit (m, world).
             z_grasp: height of the gripper frame when closing (m, world).
+            retry_yaws: closing yaws (rad, world) to try in turn after a blocked descent, at
+                most ``MAX_ATTEMPTS - 1``; without them a blocked descent keeps pressing on.
         """
-        x = self.get_input_port(1).Eval(context)
-        q = x[:self._nq]
+        yaws = [float(grasp_yaw), *(float(y) for y in retry_yaws)]
+        if len(yaws) > MAX_ATTEMPTS or not np.all(np.isfinite(yaws)):
+            raise ValueError(f"need 1 to {MAX_ATTEMPTS} finite grasp yaws, got {yaws}")
+        q = self.get_input_port(1).Eval(context)[:self._nq]
+        state = np.zeros(_N_STATE)
+        state[_GRASP][:2] = grasp_xy
+        state[_ZS], state[_ZG] = z_safe, z_grasp
+        state[_QN] = q[self._kin.q_index]
+        state[_N_YAWS], state[_YAWS][:len(yaws)] = len(yaws), yaws
+        state, v_state = self._attempt(state, 0, q, context.get_time())
+        context.SetDiscreteState(int(self._state), state)
+        context.SetDiscreteState(int(self._v_state), v_state)
+
+    def attempt(self, context) -> tuple[int, float]:
+        """(index of the current attempt, its start time in s) on this system's context."""
+        s = context.get_discrete_state(self._state).value()
+        return int(s[_ATTEMPT]), float(s[_T0])
+
+    def _attempt(self, plan, index: int, q, t: float):
+        """The state and velocity state that start attempt ``index`` of ``plan`` at time t
+        from the measured robot positions q: raise, open, transit, descend with its yaw."""
         self._kin.set_positions(q)
         X = self._kin.pose()
         yaw0 = float(np.arctan2(X.rotation().matrix()[1, 0], X.rotation().matrix()[0, 0]))
-        yaw_g = yaw0 + np.remainder(grasp_yaw - yaw0 + np.pi / 2, np.pi) - np.pi / 2
-        state = np.zeros(_N_STATE)
-        state[_MODE], state[_T0] = 1.0, context.get_time()
+        grasp_yaw = plan[_YAWS][index]
+        state = plan.copy()
+        state[_MODE], state[_T0], state[_ATTEMPT] = 1.0, t, index
         state[_Q] = q[self._kin.q_index]
         state[_START] = [*X.translation(), yaw0]
-        state[_GRASP] = [grasp_xy[0], grasp_xy[1], yaw_g]
+        state[_GRASP.stop - 1] = yaw0 + np.remainder(grasp_yaw - yaw0 + np.pi / 2, np.pi) \
+            - np.pi / 2
         z0 = X.translation()[2]
-        state[_ZS], state[_ZG] = max(z_safe, z0), z_grasp
+        state[_ZS] = max(plan[_ZS], z0)
         state[_ZR] = self._reachable_height(q, X.translation()[:2], yaw0, z0, state[_ZS])
         state[_F0] = float(np.mean(q[self._finger_q]))
-        state[_QN] = q[self._kin.q_index]
-        context.SetDiscreteState(int(self._state), state)
         n_f = len(self._finger_q)
-        context.SetDiscreteState(int(self._v_state), np.concatenate(
-            [np.zeros(7), np.full(n_f, state[_F0]), [0.0]]))
+        return state, np.concatenate([np.zeros(7), np.full(n_f, state[_F0]), [0.0]])
 
     def _reachable_height(self, q_full, xy, yaw: float, z_from: float, z_to: float) -> float:
         """Highest z <= z_to (m) reachable straight above ``xy`` with the gripper down, found by
@@ -191,7 +223,17 @@ class GraspExecutor(LeafSystem):
             return
         # Reference at the end of this update's interval (the command holds until then).
         t = context.get_time() - s[_T0] + self._period
-        pose, rate, f, f_rate, _ = self._reference(s, t)
+        pose, rate, f, f_rate, phase = self._reference(s, t)
+        if phase == _DESCEND and s[_ATTEMPT] + 1 < s[_N_YAWS]:
+            q_measured = self.get_input_port(1).Eval(context)[:self._nq]
+            self._kin.set_positions(q_measured)
+            z_reference = self._reference(s, t - self._period)[0][2]
+            if self._kin.pose().translation()[2] - z_reference > self._block_tolerance:
+                new, v_state = self._attempt(s, int(s[_ATTEMPT]) + 1, q_measured,
+                                             context.get_time())  # fmt: skip
+                discrete_state.set_value(self._state, new)
+                discrete_state.set_value(self._v_state, v_state)
+                return
         X_des = RigidTransform(gripper_rotation(pose[3]), pose[:3])
         q = s[_Q]
         q_full = self.get_input_port(0).Eval(context)[:self._nq].copy()
