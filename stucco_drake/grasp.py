@@ -3,7 +3,9 @@
 :func:`execute_grasp` runs a top-down grasp from the simulator's current state with a
 :class:`~stucco_drake.systems.grasp_executor.GraspExecutor`: raise, open, move above the
 estimate while turning so the fingers close across the target's short horizontal side, descend,
-close, lift 10 cm. It judges the outcome two ways:
+close, lift 10 cm. A round target may be closed on along any axis: when a finger lands on
+something on the way down, the gripper rises and tries the next one. It judges the outcome
+two ways:
 
 * **lift success**: the target's origin ends at least ``min_lift`` (5 cm) above where it was
   before the grasp, and lies between the fingers (see :func:`between_fingers`);
