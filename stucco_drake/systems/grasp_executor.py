@@ -119,11 +119,13 @@ class GraspExecutor(LeafSystem):
 
     @property
     def total_duration(self) -> float:
-        """Time (s) from :meth:`start` to the end of the last phase."""
+        """Time (s) from the start of an attempt (see :meth:`attempt`) to the end of the last
+        phase."""
         return float(self._ends[-1])
 
     def phase_end(self, name: str) -> float:
-        """Time (s) from :meth:`start` to the end of phase ``name``."""
+        """Time (s) from the start of an attempt (see :meth:`attempt`) to the end of phase
+        ``name``."""
         return float(self._ends[PHASES.index(name)])
 
     def start(self, context, grasp_xy, grasp_yaw: float, z_safe: float, z_grasp: float,
