@@ -59,6 +59,7 @@ MAX_ATTEMPTS = 4
 # the raise phase reaches, the attempt's index, the number of yaws, the yaws to try.
 _MODE, _T0, _Q = 0, 1, slice(2, 9)
 _START, _GRASP, _ZS, _ZG, _F0, _QN = slice(9, 13), slice(13, 16), 16, 17, 18, slice(19, 26)
+_GRASP_YAW = _GRASP.stop - 1
 _ZR, _ATTEMPT, _N_YAWS, _YAWS = 26, 27, 28, slice(29, 29 + MAX_ATTEMPTS)
 _N_STATE = 29 + MAX_ATTEMPTS
 _DESCEND = PHASES.index("descend")
@@ -170,8 +171,8 @@ class GraspExecutor(LeafSystem):
         state[_MODE], state[_T0], state[_ATTEMPT] = 1.0, t, index
         state[_Q] = q[self._kin.q_index]
         state[_START] = [*X.translation(), yaw0]
-        state[_GRASP.stop - 1] = yaw0 + np.remainder(grasp_yaw - yaw0 + np.pi / 2, np.pi) \
-            - np.pi / 2
+        # The equivalent closing yaw (mod pi) nearest the current one: the least turn.
+        state[_GRASP_YAW] = yaw0 + np.remainder(grasp_yaw - yaw0 + np.pi / 2, np.pi) - np.pi / 2
         z0 = X.translation()[2]
         state[_ZS] = max(plan[_ZS], z0)
         state[_ZR] = self._reachable_height(q, X.translation()[:2], yaw0, z0, state[_ZS])
