@@ -76,7 +76,15 @@ def shape_sse(points_xy, poses, shape: BoxSdf | CylinderSdf) -> tuple[float, flo
     return target, curve_sse(points_xy)[0]
 
 
-def shape_excess(fits, noise: float) -> np.ndarray:
+def pooled_noise_variance(fits, noise: float) -> float:
+    """The sensor's noise variance (m^2) pooled over segments' ``fits`` (see :func:`shape_excess`)."""
+    fits = np.asarray(fits, dtype=np.float64).reshape(-1, 3)
+    target, curve, count = fits.T
+    variance = np.minimum(target, curve) / np.maximum(count - 3.0, 1.0)
+    return max(noise**2, float(np.median(variance)))
+
+
+def shape_excess(fits, noise: float, variance: float | None = None) -> np.ndarray:
     """(s,) how much worse the target's outline explains each segment than a circle or line.
 
     ``fits`` (s, 3) holds each segment's (target SSE, curve SSE, point count), see
@@ -88,10 +96,10 @@ def shape_excess(fits, noise: float) -> np.ndarray:
     of the better model's residual variance (SSE over n - 3 degrees of freedom), floored at
     ``noise`` (m). Pooling keeps a genuine target seen through heavier noise than ``noise``
     from being rejected (alone, the statistic is then an F-test), while a clutter segment whose
-    residuals are large under every model cannot dilute its own evidence.
+    residuals are large under every model cannot dilute its own evidence. A given
+    ``variance`` (m^2) replaces the pooled one (:func:`pooled_noise_variance` of ``fits``).
     """
     fits = np.asarray(fits, dtype=np.float64).reshape(-1, 3)
-    target, curve, count = fits.T
-    variance = np.minimum(target, curve) / np.maximum(count - 3.0, 1.0)
-    sigma2 = max(noise**2, float(np.median(variance)))
-    return (target - curve) / sigma2
+    if variance is None:
+        variance = pooled_noise_variance(fits, noise)
+    return (fits[:, 0] - fits[:, 1]) / variance

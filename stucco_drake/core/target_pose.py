@@ -13,7 +13,7 @@ import itertools
 import numpy as np
 
 from stucco_drake.core.icp import cross_section_sdf, icp_2d, sample_outline
-from stucco_drake.core.outline_fit import shape_excess, shape_sse
+from stucco_drake.core.outline_fit import pooled_noise_variance, shape_excess, shape_sse
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_penetration import (
     penetration_window,
@@ -315,7 +315,15 @@ def estimate_target_pose(
     if not fits:
         raise ValueError(f"labels: no segment has at least {min_points} points")
     fitted = [members for members in singles if members in fits]
-    statistics = shape_excess([fits[m][3] for m in fitted], contact_noise) if fitted else []
+    # One noise model for the whole estimate: the sensor's, pooled over the segments.
+    noise_variance = (
+        pooled_noise_variance([fits[m][3] for m in fitted], contact_noise)
+        if fitted
+        else contact_noise**2
+    )
+    statistics = (
+        shape_excess([fits[m][3] for m in fitted], contact_noise, noise_variance) if fitted else []
+    )
     excess = dict(zip(fitted, statistics, strict=True))
     consistent = {
         members: selection == "paper" or bool(excess[members] <= shape_threshold)
@@ -362,7 +370,7 @@ def estimate_target_pose(
             key=lambda members: (
                 0.5 * max(excess[members], -shape_threshold)
                 + np.log(max(fits[members][0], 1e-12))
-                + 0.5 * fits[members][3][0] / contact_noise**2
+                + 0.5 * fits[members][3][0] / noise_variance
             ),
         )
     _, result, height, _ = fits[chosen]
