@@ -12,6 +12,7 @@ from stucco_drake.core.icp import (
     sample_outline,
     transform,
 )
+from stucco_drake.core.outline_fit import pooled_noise_variance, shape_excess
 from stucco_drake.core.pose_penetration import penetration_window, restart_penetration
 from stucco_drake.core.target_pose import estimate_target_pose
 
@@ -382,3 +383,13 @@ def test_bad_input_names_the_argument():
         sample_box_outline([0.03, 0.08], 0.0)
     with pytest.raises(ValueError, match=r"^start: expected"):
         icp_2d(rng, points[:, :2], sample_outline(BOX, 0.002), start="origin")
+
+
+def test_pooled_noise_is_the_median_residual_variance_floored():
+    # Residual variances of the better model: 4e-5 / 4, 1e-6 / 2 and 8e-4 / 10 (m^2).
+    fits = [(4e-5, 6e-5, 7), (1e-6, 2e-6, 5), (9e-4, 8e-4, 13)]
+    assert pooled_noise_variance(fits, 0.002) == pytest.approx(1e-5)
+    assert pooled_noise_variance(fits, 0.004) == pytest.approx(1.6e-5)
+    excess = shape_excess(fits, 0.002)
+    assert excess == pytest.approx([-2.0, -0.1, 10.0])
+    assert shape_excess(fits, 0.002, 2e-5) == pytest.approx(excess / 2)

@@ -77,7 +77,12 @@ def shape_sse(points_xy, poses, shape: BoxSdf | CylinderSdf) -> tuple[float, flo
 
 
 def pooled_noise_variance(fits, noise: float) -> float:
-    """The sensor's noise variance (m^2) pooled over segments' ``fits`` (see :func:`shape_excess`)."""
+    """The sensor's noise variance (m^2) pooled over the segments' ``fits``.
+
+    ``fits`` (s, 3) as in :func:`shape_excess`: the median over segments of the better
+    model's residual variance (SSE over n - 3 degrees of freedom), floored at ``noise`` (m)
+    squared.
+    """
     fits = np.asarray(fits, dtype=np.float64).reshape(-1, 3)
     target, curve, count = fits.T
     variance = np.minimum(target, curve) / np.maximum(count - 3.0, 1.0)

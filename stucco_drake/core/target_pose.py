@@ -165,10 +165,11 @@ def estimate_target_pose(
        unbiased x and y variances, m^2) is taken as the target, as in the paper. Position, not
        yaw, is compared, so a box's 180-degree symmetry does not count as spread.
        ``selection="shape"``: of the segments kept, the one with the lowest
-       ``max(shape_excess, -shape_threshold) / 2 + ln(variance) + sse / (2 contact_noise^2)``
+       ``max(shape_excess, -shape_threshold) / 2 + ln(variance) + sse / (2 sigma^2)``
        is taken: the paper's spread, the shape evidence (a log-likelihood ratio) and the target
        outline's own fit (its negative log-likelihood under the sensor's noise, ``sse`` the
-       outline's squared residuals, m^2) as log-scores, so a segment the box explains e-fold
+       outline's squared residuals, m^2, sigma^2 the noise variance pooled in step 2) as
+       log-scores, so a segment the box explains e-fold
        better than a curve may have an e-fold larger spread, and a segment the outline misses
        by several noise widths loses to one it fits to within the noise. Evidence for the
        outline counts up to the threshold only: it says a segment is not an arc or a line,
@@ -219,11 +220,21 @@ def estimate_target_pose(
     The outline's own fit settles a case both miss (scene TC, seed 0): a 12-point cloud of
     tracked points on a large can, which neither the target's 3.8 cm circle nor any curve fits
     (8.5 mm RMS), had the lower spread (4.6e-4 against 1.5e-3 m^2 for the 7 target points
-    fitted to 1.4 mm) and an excess near 0; its outline term, SSE / (2 sigma^2) with the 2 mm
-    noise, decides (109 against 1.6 for the target). On the Drake BOR logs (seeds 0-5,
-    STUCCO) the target estimate was within 2 cm in 6 of 6 TC runs with this term and 3 of 6
-    without; FB, IB and BC kept their choices or improved (BC median position error 28 -> 12
-    cm).
+    fitted to 1.4 mm) and an excess near 0; its outline term, SSE / (2 sigma^2) with the
+    pooled 7.0 mm noise, decides (8.8 against 0.13 for the target). On the Drake BOR logs
+    (seeds 0-5, STUCCO) the target estimate was within 2 cm in 6 of 6 TC runs with this term
+    and 3 of 6 without; FB, IB and BC kept their choices or improved (BC median position
+    error 28 -> 12 cm).
+
+    The outline term's sigma is the pooled one, not the floor ``contact_noise``: one noise
+    model for the whole estimate. Tracked points scatter more than the sensor's contacts (the
+    tracker moves them), and a term at the floor charged every point of a candidate for
+    that scatter, so fewer points won: scene BC, seed 3 (touched-side rule), the box's near
+    end alone (7 points, spread 4.9e-3 m^2, 16 cm off) beat its union with the far end's 2
+    points (spread 6.0e-4 m^2, 2.1 mm RMS) on outline terms of 0.2 against 5.0 at 2 mm; at
+    the pooled 5.2 mm they are 0.03 and 0.7 and the union (2.9 cm off) is taken. Over the
+    Drake BOR logs of the four scenes, 20 seeds, every method and both contact motions (960
+    estimates) the choice changed in 103, 50 of them in BC, mostly to such a union.
 
     With ``merge_segments`` (default, ``selection="shape"`` only) the union of any two segments
     whose points span no more than the target's cross-section can (:func:`outline_extent` plus
