@@ -169,9 +169,9 @@ def estimate_target_pose(
        is taken: the paper's spread, the shape evidence (a log-likelihood ratio) and the target
        outline's own fit (its negative log-likelihood under the sensor's noise, ``sse`` the
        outline's squared residuals, m^2, sigma^2 the noise variance pooled in step 2) as
-       log-scores, so a segment the box explains e-fold
-       better than a curve may have an e-fold larger spread, and a segment the outline misses
-       by several noise widths loses to one it fits to within the noise. Evidence for the
+       log-scores, so a segment the box explains e-fold better than a curve may have an
+       e-fold larger spread, and a segment the outline misses by several noise widths loses
+       to one it fits to within the noise. Evidence for the
        outline counts up to the threshold only: it says a segment is not an arc or a line,
        not which of the segments that are not is the target. Uncapped, tracked points on a can
        that the tracker had spread into no curve's shape won on it alone (scene BC, seeds 1
@@ -327,14 +327,9 @@ def estimate_target_pose(
         raise ValueError(f"labels: no segment has at least {min_points} points")
     fitted = [members for members in singles if members in fits]
     # One noise model for the whole estimate: the sensor's, pooled over the segments.
-    noise_variance = (
-        pooled_noise_variance([fits[m][3] for m in fitted], contact_noise)
-        if fitted
-        else contact_noise**2
-    )
-    statistics = (
-        shape_excess([fits[m][3] for m in fitted], contact_noise, noise_variance) if fitted else []
-    )
+    sums = [fits[m][3] for m in fitted]
+    noise_variance = pooled_noise_variance(sums, contact_noise) if fitted else contact_noise**2
+    statistics = shape_excess(sums, contact_noise, noise_variance) if fitted else []
     excess = dict(zip(fitted, statistics, strict=True))
     consistent = {
         members: selection == "paper" or bool(excess[members] <= shape_threshold)
