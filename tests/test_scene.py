@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from pydrake.math import RollPitchYaw
 
 from stucco_drake.core import SoftTrackingParams
 from stucco_drake.scenes import (
@@ -18,6 +19,7 @@ from stucco_drake.scenes import (
     load_scene,
     load_scene_text,
 )
+from stucco_drake.scenes.builder import IIWA, _joint_gains
 from stucco_drake.scenes.playback import make_simulator, play, record
 
 # Action counts of the paper's sequences; the training scenes carry a 10-action smoke push.
@@ -127,6 +129,47 @@ def test_objects_rest_still_when_untouched():
         assert abs(after.objects[name][3] - pose[3]) < math.radians(0.05), name
 
 
+def _max_target_tilt(scene, n_actions: int) -> float:
+    """The target's largest roll or pitch (deg) over the scene's first n actions, every 20 ms."""
+    scene.actions = scene.actions[:n_actions]
+    built = build_scene(scene)
+    simulator = make_simulator(built)
+    plant_context = built.plant.GetMyContextFromRoot(simulator.get_context())
+    body = built.free_bodies[scene.target]
+    tilt = 0.0
+    for t in np.arange(0.02, n_actions * scene.action_duration + 1e-9, 0.02):
+        simulator.AdvanceTo(t)
+        rpy = RollPitchYaw(body.EvalPoseInWorld(plant_context).rotation()).vector()
+        tilt = max(tilt, math.degrees(max(abs(rpy[0]), abs(rpy[1]))))
+    return tilt
+
+
+def test_compliant_arm_keeps_fbs_heavy_box_upright():
+    # FB's fifth action is its first full push into the 10 kg box (0.066 m deep, so 21 N at
+    # the plates' top edge tips it). FB's stiff arm (kp 2500) strikes it at 60-90 N despite
+    # the 30 N push cap and tips it 3.6 deg; a compliant arm (kp 400 on the arm's joints, the
+    # fingers unchanged) presses it gradually: 1.1 deg.
+    stiff = _max_target_tilt(load_scene("FB"), 5)
+    compliant_scene = load_scene("FB")
+    compliant_scene.control.kp, compliant_scene.control.kd = 400.0, 40.0
+    compliant_scene.control.ki = 0.0
+    compliant = _max_target_tilt(compliant_scene, 5)
+    assert stiff > 3.0, stiff
+    assert compliant < 1.5, compliant
+
+
+def test_arm_and_finger_gains_are_set_apart():
+    scene = load_scene_text(_scene_text(""))
+    scene.control.kp, scene.control.finger_kp, scene.control.finger_kd = 400.0, 2000.0, 90.0
+    built = build_scene(scene)
+    arm = built.robot_plant.GetModelInstanceByName(IIWA)
+    kp, ki, kd = _joint_gains(built.robot_plant, arm, scene.control)
+    assert len(kp) == built.robot_plant.num_velocities() == 9  # 7 arm joints, 2 fingers
+    np.testing.assert_array_equal(kp, [400.0] * 7 + [2000.0] * 2)
+    np.testing.assert_array_equal(kd, [100.0] * 7 + [90.0] * 2)
+    np.testing.assert_array_equal(ki, [10.0] * 9)
+
+
 def test_applied_torque_balances_gravity_when_holding_still():
     # What a wrench estimator relies on: at rest and free of contact, the exported torque is
     # the robot's gravity torque, in the robot-only plant's ordering.
@@ -221,6 +264,8 @@ def test_friction_override_reaches_the_contact_solver():
         ("target: nothing\n", "target"),
         ("actions:\n  - [1, 0, 3]\n", "actions[0]"),
         ("friction:\n  table: -0.1\n", "friction.table"),
+        ("control:\n  kp: -1.0\n", "control.kp"),
+        ("control:\n  finger_ki: -1.0\n", "control.finger_ki"),
     ],
 )
 def test_malformed_scene_file_fails_with_one_line(tmp_path, patch, key):

@@ -42,7 +42,7 @@ from pydrake.systems.primitives import MatrixGain
 
 from stucco_drake.models import add_iiwa14_with_bubble_gripper, configure_parser
 from stucco_drake.scenes.primitives import add_primitive
-from stucco_drake.scenes.scene_file import Primitive, SceneFile, SceneFileError
+from stucco_drake.scenes.scene_file import ControlParams, Primitive, SceneFile, SceneFileError
 from stucco_drake.systems.planar_controller import (
     ArmKinematics,
     PlanarActionSequence,
@@ -119,6 +119,18 @@ def _add_robot(plant: MultibodyPlant, scene: SceneFile):
         plant.world_frame(), plant.GetFrameByName("iiwa_link_0", iiwa), robot_base_pose(scene)
     )
     return iiwa, gripper
+
+
+def _joint_gains(robot_plant: MultibodyPlant, arm, control: ControlParams):
+    """Per-velocity (kp, ki, kd) of the joint controller: the arm's gains on the arm's joints,
+    the fingers' on every other robot joint."""
+    nv = robot_plant.num_velocities()
+    kp, ki, kd = (np.full(nv, g) for g in (control.finger_kp, control.finger_ki, control.finger_kd))
+    for index in robot_plant.GetJointIndices(arm):
+        joint = robot_plant.get_joint(index)
+        dofs = slice(joint.velocity_start(), joint.velocity_start() + joint.num_velocities())
+        kp[dofs], ki[dofs], kd[dofs] = control.kp, control.ki, control.kd
+    return kp, ki, kd
 
 
 def make_robot_plant(scene: SceneFile) -> MultibodyPlant:
@@ -277,9 +289,9 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
 
     select_state = builder.AddNamedSystem("robot_state_selector", MatrixGain(S))
     builder.Connect(plant.get_state_output_port(), select_state.get_input_port())
-    nv_r = robot_plant.num_velocities()
+    kp, ki, kd = _joint_gains(robot_plant, arm, control)
     idc = builder.AddNamedSystem("joint_controller", InverseDynamicsController(
-        robot_plant, [control.kp] * nv_r, [control.ki] * nv_r, [control.kd] * nv_r, False
+        robot_plant, kp, ki, kd, False
     ))
     B = _actuation_selector(plant, robot_plant)
     to_actuation = builder.AddNamedSystem("to_actuation", MatrixGain(B))

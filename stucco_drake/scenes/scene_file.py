@@ -86,8 +86,14 @@ class ControlParams:
     """Joint-level and end-effector control.
 
     Attributes:
-        kp, kd, ki: joint gains of the inverse-dynamics controller (1/s^2, 1/s, 1/s^3); they
-            multiply the mass matrix, so they act like a unit-mass PID on every joint.
+        kp, kd, ki: gains of the inverse-dynamics controller on the arm's joints (1/s^2, 1/s,
+            1/s^3); they multiply the mass matrix, so they act like a unit-mass PID on every
+            joint. A planar force on the gripper at the BOR start posture meets an effective
+            mass of 1.0-1.6 kg, so kp = 2500 holds it like a spring of 2400-4100 N/m; a lower
+            kp gives a compliant arm that presses into what blocks it gradually rather than
+            striking it.
+        finger_kp, finger_kd, finger_ki: the same gains on the gripper's finger joints, kept
+            apart so that a compliant arm still squeezes hard enough to lift the target.
         ik_period: period of the differential-IK update (s).
         ik_gain: pose-error feedback gain of the differential IK (1/s).
         move_fraction: fraction of each action's duration spent moving; the rest settles.
@@ -102,6 +108,9 @@ class ControlParams:
     kp: float = 2500.0
     kd: float = 100.0
     ki: float = 10.0
+    finger_kp: float = 2500.0
+    finger_kd: float = 100.0
+    finger_ki: float = 10.0
     ik_period: float = 0.01
     ik_gain: float = 20.0
     move_fraction: float = 0.7
@@ -262,6 +271,10 @@ def _check(scene: SceneFile) -> None:
     c = scene.control
     need(0 < c.move_fraction <= 1, "control.move_fraction", "must lie in (0, 1]")
     need(c.max_step > 0, "control.max_step", "must be > 0")
+    for key in ("kp", "kd", "finger_kp", "finger_kd"):
+        need(getattr(c, key) > 0, f"control.{key}", "must be > 0")
+    for key in ("ki", "finger_ki"):
+        need(getattr(c, key) >= 0, f"control.{key}", "must be >= 0")
     need(c.max_push_force is None or c.max_push_force > 0, "control.max_push_force",
          "must be > 0 (or omitted)")
     need(c.ik_period >= scene.plant.time_step, "control.ik_period", "must be >= plant.time_step")
