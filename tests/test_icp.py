@@ -343,6 +343,33 @@ def test_since_touch_ignores_configs_from_before_the_target_was_pushed(disc_pene
     assert position < 0.01 and np.degrees(yaw) < 3.0
 
 
+def test_configs_that_touched_the_target_count_with_a_tolerance(disc_penetration):
+    """The robot slid along one long side of the box, then touched its far end last, from
+    beyond it. Counting only the configs since that last touch, the box mirrored through the
+    touched face onto the robot's side penetrates nothing and fits as well, and is taken; the
+    slide's configs, where the robot touched the box, still rule it out at 1 cm tolerance."""
+    truth, points, hx, along = _one_long_side()
+    hy = BOX.half_extents[1]
+    slide = transform(truth[None], np.column_stack([np.full(20, hx + 0.021), along]))[0]
+    beyond_end = transform(truth[None], np.array([[0.0, hy + 0.021]]))[0]
+    configs = lift(np.concatenate([slide, beyond_end]))
+    steps = np.append(np.arange(19), 20)  # the face's far-end point was sensed from beyond it
+    labels = np.zeros(20, dtype=int)
+    offsets = {}
+    for tolerance in (None, 0.01):
+        estimate = estimate_target_pose(
+            np.random.default_rng(1), points, labels, BOX, disc_penetration, configs,
+            penetration_configs="since_touch", point_steps=steps, touch_tolerance=tolerance,
+        )  # fmt: skip
+        # The box centre's offset from the truth along the face normal: 2 hx when mirrored.
+        offsets[tolerance] = ((estimate.pose[:2] - truth[:2]) @ rotations(truth[2]))[0]
+        assert np.degrees(pose_errors(estimate.pose, truth)[1]) < 3.0
+    print(f"\nnormal offset: window alone {offsets[None] * 1e3:.1f} mm, "
+          f"touched configs {offsets[0.01] * 1e3:.1f} mm")
+    assert offsets[None] > 1.9 * hx
+    assert abs(offsets[0.01]) < 0.003
+
+
 def test_penetration_window():
     assert penetration_window(10, "all") == slice(0, 10)
     assert penetration_window(10, "latest") == slice(9, 10)
@@ -375,6 +402,8 @@ def test_bad_input_names_the_argument():
         estimate_target_pose(rng, points, labels, BOX, selection="rms")
     with pytest.raises(ValueError, match=r"^contact_noise: must be"):
         estimate_target_pose(rng, points, labels, BOX, contact_noise=0.0)
+    with pytest.raises(ValueError, match=r"^touch_tolerance: must be"):
+        estimate_target_pose(rng, points, labels, BOX, touch_tolerance=-0.01)
     with pytest.raises(ValueError, match=r"^config_positions: expected shape"):
         estimate_target_pose(rng, points, labels, BOX, None, np.zeros((4, 2)))
     with pytest.raises(ValueError, match=r"^points_xy: no contact points"):
