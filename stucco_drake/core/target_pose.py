@@ -25,6 +25,11 @@ from stucco_drake.core.validation import as_finite_array, as_rotation
 #: Segment selection rules of :func:`estimate_target_pose`.
 SELECTIONS = ("shape", "paper")
 
+#: Penetration (m) forgiven per pair at the configs before the penetration window at which the
+#: chosen segment was touched: how far the target may have moved since (see
+#: :func:`estimate_target_pose`).
+TOUCH_TOLERANCE = 0.01
+
 
 @dataclasses.dataclass(frozen=True)
 class SegmentReport:
@@ -147,7 +152,7 @@ def estimate_target_pose(
     penetration_configs: str | int = "all",
     point_steps=None,
     merge_segments: bool = True,
-    touch_tolerance: float | None = 0.01,
+    touch_tolerance: float | None = TOUCH_TOLERANCE,
 ) -> TargetPoseEstimate:
     """Estimate the target's planar pose from segmented contact points (paper Sec. V-C).
 

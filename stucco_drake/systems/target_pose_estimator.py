@@ -13,7 +13,11 @@ from pydrake.systems.framework import LeafSystem
 from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
-from stucco_drake.core.target_pose import TargetPoseEstimate, estimate_target_pose
+from stucco_drake.core.target_pose import (
+    TOUCH_TOLERANCE,
+    TargetPoseEstimate,
+    estimate_target_pose,
+)
 
 
 @dataclasses.dataclass
@@ -77,6 +81,9 @@ class TargetPoseEstimator(LeafSystem):
             (default; those since the chosen segment was last touched, because the target
             may have been pushed since the older ones), ``"all"`` (the authors' code) or
             ``"latest"`` (the paper's text).
+        touch_tolerance: per-pair penetration (m) forgiven at the configs before that window
+            at which the chosen segment was touched (default 1 cm: how far the target may
+            have moved since); None leaves them out.
     """
 
     def __init__(
@@ -87,6 +94,7 @@ class TargetPoseEstimator(LeafSystem):
         check_period: float,
         n_restarts: int = 30,
         penetration_configs: str | int = "since_touch",
+        touch_tolerance: float | None = TOUCH_TOLERANCE,
     ):
         super().__init__()
         if not check_period > 0:
@@ -95,6 +103,7 @@ class TargetPoseEstimator(LeafSystem):
         self.penetration = penetration
         self.n_restarts = int(n_restarts)
         self.penetration_configs = penetration_configs
+        self.touch_tolerance = touch_tolerance
         self._ee_pose = self.DeclareAbstractInputPort(
             "ee_pose", AbstractValue.Make(RigidTransform())
         )
@@ -149,6 +158,7 @@ class TargetPoseEstimator(LeafSystem):
                 initial_pose=None if previous is None else previous.pose,
                 penetration_configs=self.penetration_configs,
                 point_steps=updated.point_steps,
+                touch_tolerance=self.touch_tolerance,
             )
         state.get_mutable_abstract_state(int(self._state)).set_value(updated)
 
