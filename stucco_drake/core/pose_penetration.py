@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from stucco_drake.core.icp import transform
+from stucco_drake.core.icp import cross_section_sdf, sample_outline, transform
 from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
 #: Pair budget of one vectorised penetration block: (restart, config) pairs x model points.
 _PAIR_POINT_BUDGET = 1 << 20
@@ -19,6 +20,19 @@ _PAIR_POINT_BUDGET = 1 << 20
 #: :func:`~stucco_drake.core.target_pose.estimate_target_pose` the restarts are checked against
 #: for penetration (besides an integer N: the last N).
 PENETRATION_CONFIGS = ("all", "latest", "since_touch")
+
+
+def sample_cross_section(shape: BoxSdf | CylinderSdf, spacing: float) -> np.ndarray:
+    """(m, 2) points covering ``shape``'s cross-section in frame O: its outline plus a grid inside.
+
+    The interior matters for penetration: a robot lying wholly inside a wrongly posed object
+    touches none of its outline points.
+    """
+    outline = sample_outline(shape, spacing)
+    lower, upper = outline.min(axis=0), outline.max(axis=0)
+    axes = [np.arange(lo + spacing / 2, hi, spacing) for lo, hi in zip(lower, upper, strict=True)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)
+    return np.concatenate([outline, grid[cross_section_sdf(shape)(grid) < 0.0]])
 
 
 def penetration_window(n_configs: int, rule: str | int, segment_steps=None) -> slice:
