@@ -153,3 +153,14 @@ def test_target_pose_estimator_recovers_a_pushed_box(disc_penetration, observati
     assert np.linalg.norm(estimate.pose[:2] - nearest) <= 0.03
     assert len(estimate.segments) == 2
     assert all(report.n_points == 8 for report in estimate.segments)
+
+
+def test_target_pose_estimator_rejects_a_negative_touch_tolerance(disc_penetration):
+    from stucco_drake.core.shapes import BoxSdf
+    from stucco_drake.systems.target_pose_estimator import TargetPoseEstimator
+
+    box = BoxSdf((0.05, 0.05, 1.0), (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match=r"^touch_tolerance: must be >= 0"):
+        TargetPoseEstimator(box, disc_penetration, 0, 0.1, touch_tolerance=-0.01)
+    estimator = TargetPoseEstimator(box, disc_penetration, 0, 0.1, touch_tolerance=None)
+    assert estimator.touch_tolerance is None

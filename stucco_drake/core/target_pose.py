@@ -398,30 +398,21 @@ def estimate_target_pose(
     _, result, height, _ = fits[chosen]
     scores = np.zeros(n_restarts)
     if penetration is not None and configs is not None:
+
+        def penetrating(selected, tolerance):
+            return restart_penetration(
+                penetration, result.poses, fill, height, configs[selected], config_rotation,
+                tolerance,
+            )  # fmt: skip
+
         touched = None if point_steps is None else point_steps[np.isin(labels, chosen)]
         window = penetration_window(len(configs), penetration_configs, touched)
-        scores = restart_penetration(
-            penetration,
-            result.poses,
-            fill,
-            height,
-            configs[window],
-            config_rotation,
-            penetration_tolerance,
-        )
+        scores = penetrating(window, penetration_tolerance)
         if touch_tolerance is not None and touched is not None:
             # Points sensed after the last config passed belong to it (as in the window).
             earlier = np.unique(np.minimum(touched, len(configs) - 1))
             earlier = earlier[earlier < window.start]
-            scores = scores + restart_penetration(
-                penetration,
-                result.poses,
-                fill,
-                height,
-                configs[earlier],
-                config_rotation,
-                max(float(touch_tolerance), penetration_tolerance),
-            )
+            scores = scores + penetrating(earlier, max(touch_tolerance, penetration_tolerance))
     # Exact ties are the common case (several restarts with no penetration at all); the small
     # absolute slack only absorbs summation round-off.
     tied = np.flatnonzero(scores <= scores.min() + 1e-12)

@@ -99,6 +99,8 @@ class TargetPoseEstimator(LeafSystem):
         super().__init__()
         if not check_period > 0:
             raise ValueError(f"check_period: must be > 0 s, got {check_period!r}")
+        if touch_tolerance is not None and not touch_tolerance >= 0:
+            raise ValueError(f"touch_tolerance: must be >= 0 m or None, got {touch_tolerance!r}")
         self.target_shape = target_shape
         self.penetration = penetration
         self.n_restarts = int(n_restarts)
