@@ -289,8 +289,8 @@ def build_bor_diagram(
         threshold: detection threshold on the chi-square statistic (default
             :func:`~stucco_drake.systems.contact_detector.default_threshold`).
         estimator_gain: the momentum observer's bandwidth K_O (1/s).
-        dx_model: how the tracker moves contact points, ``"ee"`` (paper) or ``"normal"``
-            (see :class:`~stucco_drake.systems.soft_tracking_filter.SoftTrackingFilter`).
+        dx_model: how the tracker moves contact points, ``"ee"`` (paper), ``"normal"`` or
+            ``"cone"`` (see :class:`~stucco_drake.systems.soft_tracking_filter.SoftTrackingFilter`).
         external_actions: export a ``planar_step`` input, (dx, dy) in m (world), read at the
             start of each action, instead of playing ``scene.actions`` (closed-loop policies).
     """

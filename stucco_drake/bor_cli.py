@@ -22,7 +22,7 @@ DIAGRAM_DEPTH = 1
 def add_run_command(subparsers) -> None:
     """Adds ``run`` to the CLI's subparsers."""
     from stucco_drake.core.baselines import TRACKER_NAMES
-    from stucco_drake.core.contact_motion import DX_MODELS
+    from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
 
     run = subparsers.add_parser("run", help="rummage a scene blind, track contacts, estimate "
                                             "the target's pose; print GS, CE, FMI")  # fmt: skip
@@ -33,8 +33,7 @@ def add_run_command(subparsers) -> None:
     run.add_argument("--actions", type=int, default=None,
                      help="play only the first N actions (default: all)")
     run.add_argument("--dx-model", choices=DX_MODELS, default="ee",
-                     help="how tracked contacts move: the end effector's displacement in "
-                          "contact (ee, the paper) or its part along the contact normal")
+                     help=f"how tracked contacts move ({DX_MODELS_SUMMARY})")
     run.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
     run.add_argument("--record", metavar="OUT.html",
                      help="save a standalone Meshcat HTML recording of the run")

@@ -163,8 +163,8 @@ def run_episode(
 
     ``on_action(k, action_contacts)`` is called after each action's contacts are formed;
     ``grasp`` (see :data:`GraspHook`) after the last action's pose estimate. ``dx_model``
-    (``"ee"``, the paper, or ``"normal"``) is how the tracker moves contact points, when the
-    Diagram is built here.
+    (``"ee"``, the paper, ``"normal"`` or ``"cone"``) is how the tracker moves contact
+    points, when the Diagram is built here.
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
     bor = bor or build_bor_diagram(scene, method, seed, meshcat=meshcat, dx_model=dx_model)

@@ -12,7 +12,7 @@ import sys
 from collections.abc import Mapping
 
 from stucco_drake.core.baselines import TRACKER_NAMES
-from stucco_drake.core.contact_motion import DX_MODELS
+from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
 from stucco_drake.eval.runner import RunInterrupted, make_executor
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
 from stucco_drake.eval.sweep import AMBIGUOUS, parse_grid, run_sweep, tuned_path
@@ -36,9 +36,7 @@ def add_sweep_command(subparsers, sources: Mapping[str, EpisodeSource] = SWEEP_S
     sweep.add_argument("--workers", type=int, default=None,
                        help="parallel worker processes (default: one per CPU)")
     sweep.add_argument("--dx-model", choices=DX_MODELS, default="ee",
-                       help="how contact points move in the replays: the end effector's "
-                            "displacement in contact (ee, the paper) or its part along the "
-                            "contact normal")
+                       help=f"how contact points move in the replays ({DX_MODELS_SUMMARY})")
     sweep.add_argument("--grid", action="append", default=None, metavar="NAME=V1,V2,...",
                        help="values of one parameter (repeatable; default: the method's "
                             "primary parameter around its paper value)")

@@ -7,6 +7,8 @@ import pytest
 
 from stucco_drake.core import BoxSdf
 from stucco_drake.core.contact_motion import (
+    CONE_FRICTION,
+    clip_to_friction_cone,
     contact_motion,
     project_onto_normals,
     robot_surface_normals,
@@ -34,6 +36,30 @@ def test_projection_keeps_the_normal_part_with_its_sign():
     np.testing.assert_allclose(pushes, [[0.01, 0, 0], [0, 0, 0], [0, 0.03, 0]], atol=1e-15)
     with pytest.raises(ValueError, match="normals"):
         project_onto_normals(dx, normals[:2])
+
+
+def test_friction_cone_keeps_a_sticking_push_and_clips_a_sliding_one():
+    """Normal +x (not unit), coefficient 0.3: a push 1 cm in x may carry 3 mm sideways."""
+    normals = np.array([[2.0, 0.0, 0.0]] * 4 + [[0.0, 0.0, 0.0]])
+    dx = np.array([
+        [0.01, 0.002, 0.0],  # inside the cone: sticks, moves whole
+        [0.01, 0.02, 0.0],  # outside: the 2 cm sideways part is cut to 3 mm, direction kept
+        [0.01, -0.012, 0.016],  # outside, tangent part (-0.012, 0.016) of 2 cm cut to 3 mm
+        [-0.01, 0.02, 0.0],  # a retreat: only the (signed) normal part
+        [0.0, 0.03, 0.0],  # unknown normal: unchanged
+    ])
+    np.testing.assert_allclose(
+        clip_to_friction_cone(dx, normals, 0.3),
+        [[0.01, 0.002, 0.0], [0.01, 0.003, 0.0], [0.01, -0.0018, 0.0024], [-0.01, 0.0, 0.0],
+         [0.0, 0.03, 0.0]], atol=1e-15)  # fmt: skip
+    # Coefficient 0 is the normal model; a huge one the end effector's displacement.
+    np.testing.assert_allclose(clip_to_friction_cone(dx, normals, 0.0),
+                               project_onto_normals(dx, normals), atol=1e-15)  # fmt: skip
+    np.testing.assert_allclose(clip_to_friction_cone(dx[:3], normals[:3], 1e3), dx[:3])
+    with pytest.raises(ValueError, match="friction"):
+        clip_to_friction_cone(dx, normals, -0.1)
+    with pytest.raises(ValueError, match="friction"):
+        clip_to_friction_cone(dx, normals, float("nan"))
 
 
 def test_normals_point_out_of_the_robot_in_the_world_frame(box_robot):
@@ -78,8 +104,13 @@ def test_contact_motion_models(box_robot):
     np.testing.assert_array_equal(contact_motion("ee", dx), dx)
     normal = contact_motion("normal", dx, points, box_robot, np.zeros(3))
     np.testing.assert_allclose(normal, [[0.01, 0.0, 0.0]], atol=1e-9)
-    with pytest.raises(ValueError, match="needs"):
-        contact_motion("normal", dx)
+    # The cone lets the push carry CONE_FRICTION x 1 cm sideways, along the tangent part (y, z).
+    cone = contact_motion("cone", dx, points, box_robot, np.zeros(3))
+    side = CONE_FRICTION * 0.01 * np.array([0.02, 0.005]) / np.hypot(0.02, 0.005)
+    np.testing.assert_allclose(cone, [[0.01, side[0], side[1]]], atol=1e-9)
+    for model in ("normal", "cone"):
+        with pytest.raises(ValueError, match=f"'{model}' needs"):
+            contact_motion(model, dx)
     with pytest.raises(ValueError, match="model"):
         contact_motion("tangent", dx)
 
@@ -99,6 +130,14 @@ def test_replay_moves_points_by_the_chosen_model():
     sine = cross / np.linalg.norm(radial, axis=1) / np.linalg.norm(normal[:, :2], axis=1)
     assert np.degrees(np.abs(np.arcsin(sine))).max() < 2.0
     assert np.all(np.linalg.norm(normal, axis=1) <= np.linalg.norm(log.contact_dx, axis=1) + 1e-12)
+    # The cone model keeps that normal part and at most CONE_FRICTION times it sideways.
+    cone = observed_dx(log, "cone", penetration)
+    unit = normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+    along = np.sum(cone * unit, axis=1)
+    np.testing.assert_allclose(along[:, None] * unit, normal, atol=1e-12)
+    sideways = np.linalg.norm(cone - normal, axis=1)
+    assert np.all(sideways <= CONE_FRICTION * np.maximum(along, 0.0) + 1e-12)
+    assert sideways.max() > 1e-4  # the disc's pushes do carry the boxes sideways
     assert replay(log, "dbscan") == {**replay(log, "dbscan", dx_model="ee"), "wall_time_s": ANY}
     row = replay(log, "stucco", dx_model="normal")
     assert row["n_contacts"] == log.n_contacts and row["ce_cm"] < 0.1

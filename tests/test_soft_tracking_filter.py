@@ -111,6 +111,15 @@ def test_filter_rejects_a_non_tracker():
         SoftTrackingFilter(object(), 0, 0.001)
 
 
+def test_filter_rejects_an_unknown_contact_motion_or_one_without_the_robot():
+    tracker = make_tracker("dbscan")
+    with pytest.raises(ValueError, match=r"^dx_model: expected one of \('ee', 'normal', 'cone'\)"):
+        SoftTrackingFilter(tracker, 0, 0.001, dx_model="tangent")
+    for model in ("normal", "cone"):
+        with pytest.raises(ValueError, match=f"^dx_model '{model}' needs robot_sdf"):
+            SoftTrackingFilter(tracker, 0, 0.001, dx_model=model)
+
+
 def test_action_contacts_reject_nan_and_mismatched_dx():
     with pytest.raises(ValueError, match=r"ActionContacts\.points"):
         ActionContacts(0, [[np.nan, 0.0, 0.0]], [[0.0, 0.0, 0.0]])

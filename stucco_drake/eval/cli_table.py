@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from stucco_drake.core.baselines import TRACKER_NAMES
-from stucco_drake.core.contact_motion import DX_MODELS
+from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
 from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.replay import replay
@@ -174,8 +174,7 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES) -> None:
                        help=f"tracking methods (default: {' '.join(TRACKER_NAMES)})")
     table.add_argument("--out", required=True, help="output folder (logs, runs.csv, table)")
     table.add_argument("--dx-model", choices=DX_MODELS, default="ee",
-                       help="how contact points move: the end effector's displacement in "
-                            "contact (ee, the paper) or its part along the contact normal")
+                       help=f"how contact points move ({DX_MODELS_SUMMARY})")
     table.add_argument("--stucco-params", metavar="PARAMS.yaml", default=None,
                        help="STUCCO's parameters as YAML overrides of Table I (default: Table I)")
     table.add_argument("--workers", type=int, default=None,

@@ -76,14 +76,15 @@ def run_ambiguity(log: EpisodeLog) -> float:
 def observed_dx(log: EpisodeLog, dx_model: str, penetration: RobotPenetration | None) -> np.ndarray:
     """(N, 3) every contact's motion (m, world frame) under ``dx_model`` (see
     :mod:`stucco_drake.core.contact_motion`): the logged ``contact_dx`` for ``"ee"``; for
-    ``"normal"`` its signed projection onto the robot's outward normal at the contact, the
-    robot posed where it was logged after that contact's action."""
+    ``"normal"`` its signed projection onto the robot's outward normal at the contact, for
+    ``"cone"`` it clipped to the friction cone about that normal, the robot posed where it was
+    logged after that contact's action."""
     if dx_model == "ee":
         return log.contact_dx.copy()
     if dx_model not in DX_MODELS:
         raise ValueError(f"dx_model: expected one of {DX_MODELS}, got {dx_model!r}")
     if penetration is None:
-        raise ValueError("dx_model 'normal' needs the robot's geometry: pass penetration=")
+        raise ValueError(f"dx_model {dx_model!r} needs the robot's geometry: pass penetration=")
     dx = np.empty_like(log.contact_dx)
     for t in range(log.n_actions):  # per action: each has its own end-effector pose
         lo, hi = log.contact_offsets[t], log.contact_offsets[t + 1]
@@ -115,10 +116,11 @@ def replay(
         grasp: ``grasp(log, tracker) -> bool | None`` run after the last action; None leaves
             the row's ``grasp_success`` empty.
         dx_model: how far each contact point moves, for every method alike: ``"ee"`` (the
-            paper: the end-effector's displacement while in contact) or ``"normal"`` (its
-            signed component along the robot's outward normal at the contact, see
-            :func:`observed_dx`; a deviation from the paper). ``"normal"`` uses
-            ``penetration``'s robot geometry, built from the log as for STUCCO when omitted.
+            paper: the end-effector's displacement while in contact), ``"normal"`` (its
+            signed component along the robot's outward normal at the contact) or ``"cone"``
+            (it clipped to the friction cone about that normal; see :func:`observed_dx`;
+            both deviate from the paper). They use ``penetration``'s robot geometry, built
+            from the log as for STUCCO when omitted.
 
     Returns:
         A row with :data:`ROW_FIELDS`: ``ce_cm`` mean distance (cm) of the tracked points to

@@ -72,8 +72,10 @@ class SoftTrackingFilter(LeafSystem):
         dx_model: how far each contact point moves (see
             :func:`~stucco_drake.core.contact_motion.contact_motion`): ``"ee"`` the end
             effector's displacement in contact (paper), ``"normal"`` its part along the robot's
-            outward surface normal at the contact, which needs ``robot_sdf``.
-        robot_sdf: the robot's signed distance in the end-effector frame (for ``"normal"``).
+            outward surface normal at the contact, ``"cone"`` it clipped to the friction cone
+            about that normal; both need ``robot_sdf``.
+        robot_sdf: the robot's signed distance in the end-effector frame (for ``"normal"``
+            and ``"cone"``).
     """
 
     def __init__(self, tracker: Tracker, seed: int, check_period: float, *,
@@ -85,8 +87,8 @@ class SoftTrackingFilter(LeafSystem):
             raise ValueError(f"check_period: must be > 0 s, got {check_period!r}")
         if dx_model not in DX_MODELS:
             raise ValueError(f"dx_model: expected one of {DX_MODELS}, got {dx_model!r}")
-        if dx_model == "normal" and robot_sdf is None:
-            raise ValueError("dx_model 'normal' needs robot_sdf")
+        if dx_model != "ee" and robot_sdf is None:
+            raise ValueError(f"dx_model {dx_model!r} needs robot_sdf")
         self.dx_model, self._robot_sdf = dx_model, robot_sdf
         self._ee_pose = self.DeclareAbstractInputPort(
             "ee_pose", AbstractValue.Make(RigidTransform())
