@@ -37,8 +37,9 @@ import numpy as np
 
 from stucco_drake.core.sdf import GridSdf
 
-#: The observation models of contact motion: the paper's end-effector displacement, or its
-#: signed projection onto the robot's outward normal at the contact.
+#: The observation models of contact motion: the paper's end-effector displacement, its
+#: signed projection onto the robot's outward normal at the contact, or it clipped to the
+#: contact's friction cone.
 DX_MODELS = ("ee", "normal", "cone")
 
 #: One line on each model, for command-line help.
@@ -47,9 +48,9 @@ DX_MODELS_SUMMARY = ("ee: the end effector's displacement in contact (the paper)
                      "cone")  # fmt: skip
 
 #: The ``"cone"`` model's effective friction coefficient (unitless), fitted on the training
-#: set: over the 5717 contacts on objects of its 79 kept trials, the touched object's centre
-#: moved within 4.94 mm of the model's motion per action at 0.45 and 0.5 (4.95 at 0.4, 4.98 at
-#: 0.6, 5.01 at 0.3), against 5.54 with ``"normal"`` and 6.85 with ``"ee"``.
+#: set: over the 5717 contacts on objects of its 79 kept trials, the model's motion missed the
+#: touched object's centre's motion in that action by 4.94 mm on average at 0.45 and 0.5 (4.95
+#: at 0.4, 4.98 at 0.6, 5.01 at 0.3), against 5.54 with ``"normal"`` and 6.85 with ``"ee"``.
 CONE_FRICTION = 0.5
 
 #: Normals shorter than this (unitless gradient norm) are treated as undefined.
