@@ -37,11 +37,12 @@ def test_normal_spread_is_zero_on_a_face_and_one_across_an_edge(box_penetration)
     assert spread[2] == 0.0
 
 
-def push_second_object(penetration, margin, edge_offset=0.0, seed=0):
+def push_second_object(penetration, margin, edge_offset=0.0, seed=0, softness=0.0):
     """A and D are sensed; then the robot's +x face pushes D's object 1 cm along +x, at
     ``edge_offset`` (m) from the face's middle towards its +y edge (1 cm away). A lies 10 cm
     behind that contact's tangent plane, D 1 cm in front of it."""
-    params = dataclasses.replace(SoftTrackingParams.sim(), touched_side_margin=margin)
+    params = dataclasses.replace(SoftTrackingParams.sim(), touched_side_margin=margin,
+                                 touched_side_softness=softness)  # fmt: skip
     tracker = SoftTracker(penetration, params)
     rng = np.random.default_rng(seed)
     tracker.update(rng, [0.08, 0.0, 0.0], [A], [[0.0, 0.0, 0.0]])
@@ -74,10 +75,38 @@ def test_the_rule_yields_where_the_robot_normal_is_uncertain(box_penetration):
     assert not np.allclose(paper[:, 0], A, atol=1e-6)
 
 
+def test_a_soft_rule_lets_a_point_follow_less_the_further_behind_it_lies(box_penetration):
+    """A lies 10 cm behind the contact's plane, 9.8 cm beyond the 2 mm margin: with softness
+    sigma it follows in the particles whose draw falls below p_paper * exp(-(0.098 / sigma)^2),
+    a subset of those in which the paper's filter moves it, and D is untouched."""
+    paper = push_second_object(box_penetration, margin=None)
+    moved_paper = np.isclose(paper[:, 0, 0], A[0] + 0.01, atol=1e-6)
+    counts = {}
+    for softness in (0.03, 0.1, 1.0):
+        soft = push_second_object(box_penetration, margin=0.002, softness=softness)
+        moved = np.isclose(soft[:, 0, 0], A[0] + 0.01, atol=1e-6)
+        assert np.allclose(soft[~moved, 0], A, atol=1e-6)
+        assert not (moved & ~moved_paper).any()  # the same draws, a smaller probability
+        assert np.array_equal(soft[:, 1:], paper[:, 1:])
+        counts[softness] = int(moved.sum())
+    # exp(-(0.098/sigma)^2): 2.3e-5 at 3 cm, 0.38 at 10 cm, 0.99 at 1 m, of about 54 % (p_paper)
+    assert counts[0.03] == 0
+    assert 8 <= counts[0.1] <= 35
+    assert counts[1.0] >= int(moved_paper.sum()) - 2
+
+
+def test_softness_zero_is_the_hard_rule(box_penetration):
+    hard = push_second_object(box_penetration, margin=0.002)
+    assert np.array_equal(push_second_object(box_penetration, 0.002, softness=0.0), hard)
+    assert np.allclose(hard[:, 0], A, atol=1e-6)
+
+
 @pytest.mark.parametrize(
     ("override", "name"),
     [({"touched_side_margin": -0.001}, "touched_side_margin"),
      ({"touched_side_margin": float("nan")}, "touched_side_margin"),
+     ({"touched_side_softness": -0.01}, "touched_side_softness"),
+     ({"touched_side_softness": float("inf")}, "touched_side_softness"),
      ({"normal_probe_radius": 0.0}, "normal_probe_radius")],
 )  # fmt: skip
 def test_bad_rule_parameters_raise_naming_them(override, name):

@@ -32,6 +32,11 @@ class SoftTrackingParams:
             contact, so a point more than ``touched_side_margin + d * s`` behind that plane
             (d its distance to the contact, s the normal's uncertainty, see
             :func:`~stucco_drake.core.contact_motion.normal_spread`) stays where it is.
+        touched_side_softness: 0 (a hard rule) or a distance sigma (m) that softens it: a
+            point e metres further behind than that bound still follows, with its connection
+            probability times exp(-(e / sigma)^2), so a point of the touched object that lags
+            a little behind its object can catch up in some particles. Has no effect while
+            ``touched_side_margin`` is None.
         normal_probe_radius: how far (m) around a contact the robot's normal is compared to
             judge its uncertainty s: about the contact isolation's error.
     """
@@ -43,6 +48,7 @@ class SoftTrackingParams:
     intersection_tolerance: float = 0.002
     resample_ess_fraction: float = 0.8
     touched_side_margin: float | None = None
+    touched_side_softness: float = 0.0
     normal_probe_radius: float = 0.003
 
     def __post_init__(self):
@@ -72,6 +78,11 @@ class SoftTrackingParams:
         ):
             raise ValueError(
                 f"SoftTrackingParams.touched_side_margin: must be None or >= 0, got {margin!r}"
+            )
+        softness = self.touched_side_softness
+        if not (isinstance(softness, int | float) and math.isfinite(softness) and softness >= 0):
+            raise ValueError(
+                f"SoftTrackingParams.touched_side_softness: must be >= 0, got {softness!r}"
             )
         if not (math.isfinite(self.normal_probe_radius) and self.normal_probe_radius > 0):
             raise ValueError(

@@ -49,8 +49,9 @@ class SoftTracker:
     6. The MAP particle is the heaviest one, ties kept with the previous MAP; after resampling it
        is the first copy of that particle, so it also receives ReplaceBad's repairs.
     7. Optionally (``touched_side_margin``, off by default) a point does not follow a contact
-       it lies clearly behind: see :class:`~stucco_drake.core.params.SoftTrackingParams`.
-       The rule uses no random draw, so it changes no other draw of the step.
+       it lies clearly behind, or (``touched_side_softness``) follows it less likely the further
+       behind it lies: see :class:`~stucco_drake.core.params.SoftTrackingParams`. The rule
+       scales the connection probability and draws nothing, so it changes no draw of the step.
     8. Segmentation is the exact connected components of the MAP particle (paper); the authors'
        code expands only one level from each seed.
 
@@ -205,11 +206,12 @@ class SoftTracker:
                 d2 += (existing[axis][:, :, None] - before[None, None, :, axis]) ** 2
             nearest = np.argmin(d2, axis=2)
             nearest_d2 = np.take_along_axis(d2, nearest[:, :, None], axis=2)[:, :, 0]
-            connected = rng.random(nearest.shape) < np.exp(-nearest_d2 / self.params.length)
+            probability = np.exp(-nearest_d2 / self.params.length)
             if self.params.touched_side_margin is not None:
-                connected &= self._on_touched_side(
+                probability = probability * self._touched_side_factor(
                     existing, before, nearest, nearest_d2, points, position, rotation
                 )
+            connected = rng.random(nearest.shape) < probability
             self.dynamics.apply(existing, self._configs[:, :, :n], connected, dx[nearest])
         self._ensure_capacity(n + m)
         self._points[:, :, n : n + m] = points.T[:, None, :]
@@ -217,9 +219,11 @@ class SoftTracker:
         self._rotation_index[:, n : n + m] = self._rotation_slot(rotation)
         self._n = n + m
 
-    def _on_touched_side(self, existing, before, nearest, nearest_d2, points, position, rotation):
-        """(n_particles, n) whether each point may lie on the object its nearest new contact
-        touched: not more than margin + d * spread behind the robot's tangent plane there."""
+    def _touched_side_factor(self, existing, before, nearest, nearest_d2, points, position,
+                             rotation):  # fmt: skip
+        """(n_particles, n) factor on each point's connection probability: 1 where it may lie on
+        the object its nearest new contact touched (not more than margin + d * spread behind the
+        robot's tangent plane there); beyond that, 0 (hard rule) or a Gaussian of the excess."""
         sdf = self.penetration.robot_sdf
         normals = robot_surface_normals(sdf, points, position, rotation)
         spread = normal_spread(sdf, points, position, rotation, normals=normals,
@@ -229,8 +233,14 @@ class SoftTracker:
         for axis in range(3):
             ahead += (existing[axis] - before[nearest, axis]) * normals[nearest, axis]
         allowed = self.params.touched_side_margin + spread[nearest] * np.sqrt(nearest_d2)
+        excess = -ahead - allowed
+        softness = self.params.touched_side_softness
+        if softness > 0:
+            factor = np.exp(-((np.maximum(excess, 0.0) / softness) ** 2))
+        else:
+            factor = (excess <= 0).astype(np.float32)
         unknown = ~normals.any(axis=1)[nearest]  # no normal, no rule
-        return unknown | (ahead >= -allowed)
+        return np.where(unknown, np.float32(1.0), factor.astype(np.float32))
 
     def _in_frame(self, rotation: np.ndarray, array: np.ndarray) -> np.ndarray:
         """Coordinates of world vectors ``array[3, ...]`` along the axes of ``rotation``."""
