@@ -240,7 +240,7 @@ class SoftTracker:
         else:
             factor = (excess <= 0).astype(np.float32)
         unknown = ~normals.any(axis=1)[nearest]  # no normal, no rule
-        return np.where(unknown, np.float32(1.0), factor.astype(np.float32))
+        return np.where(unknown, np.float32(1.0), factor)
 
     def _in_frame(self, rotation: np.ndarray, array: np.ndarray) -> np.ndarray:
         """Coordinates of world vectors ``array[3, ...]`` along the axes of ``rotation``."""
