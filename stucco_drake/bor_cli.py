@@ -34,6 +34,9 @@ def add_run_command(subparsers) -> None:
                      help="play only the first N actions (default: all)")
     run.add_argument("--dx-model", choices=DX_MODELS, default="ee",
                      help=f"how tracked contacts move ({DX_MODELS_SUMMARY})")
+    run.add_argument("--stucco-params", metavar="PARAMS.yaml", default=None,
+                     help="STUCCO's parameters (YAML, fields of SoftTrackingParams over Table "
+                          "I's sim preset; default: the scene's)")
     run.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
     run.add_argument("--record", metavar="OUT.html",
                      help="save a standalone Meshcat HTML recording of the run")
@@ -61,13 +64,24 @@ def _grasp_hook(enabled: bool):
 
 def run_bor(args: argparse.Namespace) -> int:
     from stucco_drake.bor_episode import run_episode
+    from stucco_drake.core.params import SoftTrackingParams
     from stucco_drake.scenes import load_scene
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 
     scene = load_scene(args.scene)  # a bad scene file is reported by the CLI's main
+    params = None
+    try:
+        if args.stucco_params is not None:
+            if args.method != "stucco":
+                raise ValueError(f"--stucco-params is for --method stucco, not {args.method}")
+            params = SoftTrackingParams.from_yaml(Path(args.stucco_params))
+    except ValueError as error:
+        print(f"stucco-drake run: error: {error}", file=sys.stderr)
+        return 2
     meshcat = start_meshcat(args.meshcat, args.record)
     result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
-                         grasp=_grasp_hook(not args.no_grasp), dx_model=args.dx_model)
+                         grasp=_grasp_hook(not args.no_grasp), dx_model=args.dx_model,
+                         tracker_params=params)
     print(result.summary())
     if args.record:
         save_recording(meshcat, args.record)

@@ -155,6 +155,7 @@ def run_episode(
     grasp: GraspHook | None = None,
     on_action: Callable[[int, object], None] | None = None,
     dx_model: str = "ee",
+    tracker_params=None,
 ) -> EpisodeResult:
     """Plays the first ``n_actions`` actions of ``scene`` (all by default) through the BOR
     Diagram (``bor``, or one built for ``method`` and ``seed``), then scores the tracking.
@@ -164,10 +165,12 @@ def run_episode(
     ``on_action(k, action_contacts)`` is called after each action's contacts are formed;
     ``grasp`` (see :data:`GraspHook`) after the last action's pose estimate. ``dx_model``
     (``"ee"``, the paper, ``"normal"`` or ``"cone"``) is how the tracker moves contact
-    points, when the Diagram is built here.
+    points and ``tracker_params`` the method's parameters (None: the scene's for STUCCO, the
+    paper's for the baselines), when the Diagram is built here.
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
-    bor = bor or build_bor_diagram(scene, method, seed, meshcat=meshcat, dx_model=dx_model)
+    bor = bor or build_bor_diagram(scene, method, seed, tracker_params=tracker_params,
+                                   meshcat=meshcat, dx_model=dx_model)
     total = len(scene.actions)
     n_actions = total if n_actions is None else min(int(n_actions), total)
     if simulator is None:

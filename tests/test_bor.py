@@ -161,13 +161,47 @@ def test_committed_diagram_source_matches_the_code():
     )
 
 
-def test_run_command_prints_one_result_line(capsys, tmp_path):
+def test_run_command_prints_one_result_line(capsys, tmp_path, monkeypatch):
+    import stucco_drake.bor_episode as bor_episode
     from stucco_drake.cli import main
+    from stucco_drake.core.params import SoftTrackingParams
 
+    built = []
+
+    def recording_build(*args, **kwargs):  # the real Diagram, its tracker's parameters noted
+        built.append((kwargs["tracker_params"], kwargs["dx_model"]))
+        return build_bor_diagram(*args, **kwargs)
+
+    build_bor_diagram = bor_episode.build_bor_diagram
+    monkeypatch.setattr(bor_episode, "build_bor_diagram", recording_build)
+    params = tmp_path / "stucco.yaml"
+    params.write_text("touched_side_margin: 0.002\nn_particles: 50\n")
     plot = tmp_path / "fb.png"
     code = main(["run", "--scene", "FB", "--actions", "4", "--no-grasp", "--dx-model", "normal",
-                 "--plot", str(plot)])
+                 "--stucco-params", str(params), "--plot", str(plot)])
     lines = capsys.readouterr().out.splitlines()
     assert code == 0
     assert lines[0].startswith("FB stucco seed 0: GS n/a, CE ") and "in 4 actions" in lines[0]
     assert plot.stat().st_size > 10_000
+    expected = SoftTrackingParams.from_mapping({"touched_side_margin": 0.002,
+                                                "n_particles": 50})
+    assert built == [(expected, "normal")]
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--stucco-params", "missing.yaml"], "no such file missing.yaml"),
+        (["--stucco-params", "bad.yaml"], "unknown key(s) lenght"),
+        (["--stucco-params", "bad.yaml", "--method", "birch"], "is for --method stucco, not birch"),
+    ],
+)
+def test_run_command_rejects_bad_stucco_params_in_one_line(capsys, tmp_path, monkeypatch,
+                                                           extra, message):  # fmt: skip
+    from stucco_drake.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "bad.yaml").write_text("lenght: 0.02\n")
+    assert main(["run", "--scene", "FB", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("stucco-drake run: error: ") and message in err and "\n" not in err
