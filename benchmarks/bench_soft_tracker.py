@@ -12,7 +12,12 @@ The contacts come from the built-in planar world: a 10 cm disc EE rummaging thro
 scattered over 0.7 x 0.7 m, pushing them (exact contacts, so the belief stays consistent as in
 real data); pxpen is a 1 mm grid SDF of that disc.
 
+With ``--orientations`` every contact is sensed at an end-effector orientation of its own (a
+yaw drawn within +-3 deg), as in a closed-loop run, where the check makes one pass per distinct
+orientation. The disc is symmetric about z, so the contacts stay consistent.
+
 Run: python benchmarks/bench_soft_tracker.py [--particles 100] [--contacts 25 50 100 200 400]
+     [--orientations]
 """
 
 from __future__ import annotations
@@ -53,13 +58,20 @@ def contact_stream(rng, count):
             return np.array(positions), np.array(points), np.array(dx)
 
 
-def measure(particles: int, contacts: int, repeats: int, grid: GridSdf):
+def yaw_rotation(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def measure(particles: int, contacts: int, repeats: int, grid: GridSdf, orientations: bool):
     rng = np.random.default_rng(0)
     params = SoftTrackingParams(n_particles=particles)
     tracker = SoftTracker(RobotPenetration(grid), params)
     positions, points, dx = contact_stream(rng, contacts + repeats)
+    yaws = rng.uniform(-0.05, 0.05, len(points)) if orientations else np.zeros(len(points))
+    rotations = [yaw_rotation(yaw) for yaw in yaws]
     for t in range(contacts):
-        tracker.update(rng, positions[t], points[t : t + 1], dx[t : t + 1])
+        tracker.update(rng, positions[t], points[t : t + 1], dx[t : t + 1], rotations[t])
     timings = {"contact": [], "free": []}
     peak = 0
     for r in range(repeats):
@@ -68,12 +80,12 @@ def measure(particles: int, contacts: int, repeats: int, grid: GridSdf):
             args = (points[t : t + 1], dx[t : t + 1]) if kind == "contact" else (None, None)
             trial = copy.deepcopy(tracker)
             start = time.perf_counter()
-            trial.update(np.random.default_rng(r), positions[t], *args)
+            trial.update(np.random.default_rng(r), positions[t], *args, rotations[t])
             timings[kind].append(time.perf_counter() - start)
             if r < 3:  # memory in a separate pass: tracing allocations slows numpy down
                 trial = copy.deepcopy(tracker)
                 tracemalloc.start()
-                trial.update(np.random.default_rng(r), positions[t], *args)
+                trial.update(np.random.default_rng(r), positions[t], *args, rotations[t])
                 peak = max(peak, tracemalloc.get_traced_memory()[1])
                 tracemalloc.stop()
     return timings, peak
@@ -84,11 +96,15 @@ def main():
     parser.add_argument("--particles", type=int, default=100)
     parser.add_argument("--contacts", type=int, nargs="+", default=[25, 50, 100, 200, 400])
     parser.add_argument("--repeats", type=int, default=30)
+    parser.add_argument("--orientations", action="store_true",
+                        help="sense each contact at an end-effector orientation of its own")
     args = parser.parse_args()
     grid = robot_grid()
     print(
         f"# SoftTracker.update, {args.particles} particles, 1 mm grid SDF "
-        f"{tuple(grid.values.shape)}; numpy {np.__version__}, "
+        f"{tuple(grid.values.shape)}, "
+        f"{'one orientation per contact' if args.orientations else 'one orientation'}; "
+        f"numpy {np.__version__}, "
         f"{platform.processor() or platform.machine()}"
     )
     print(
@@ -97,7 +113,7 @@ def main():
     )
     print("|---:|---:|---:|---:|---:|---:|")
     for contacts in args.contacts:
-        timings, peak = measure(args.particles, contacts, args.repeats, grid)
+        timings, peak = measure(args.particles, contacts, args.repeats, grid, args.orientations)
         c, f = (np.array(timings[k]) * 1e3 for k in ("contact", "free"))
         print(
             f"| {contacts} | {np.median(c):.2f} | {np.percentile(c, 90):.2f} | "

@@ -132,3 +132,42 @@ def test_several_contacts_in_one_step_each_follow_their_own_displacement(disc_pe
     np.testing.assert_allclose(tracker.points, np.broadcast_to(points, (50, 2, 3)), atol=1e-6)
     # Configs are the pre-motion EE positions moved by each contact's dx: they end on x_t.
     np.testing.assert_allclose(tracker.configs, 0.0, atol=1e-6)
+
+
+def test_penetration_sums_over_many_orientations_equal_the_pairwise_depths():
+    """A closed-loop run senses nearly every contact at its own end-effector orientation: the
+    tracker's sums (one pass per orientation, only its configs) must equal pxpen summed pair by
+    pair with each config's own rotation (float32 grid lookups: within 1e-5 m)."""
+    from stucco_drake.core import BoxSdf, GridSdf, RobotPenetration
+
+    def rotation_about_z(yaw):
+        c, s = np.cos(yaw), np.sin(yaw)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    grid = GridSdf.build(BoxSdf((0.03, 0.01, 0.02)), [-0.04, -0.02, -0.03], [0.04, 0.02, 0.03],
+                         1e-3)  # fmt: skip
+    penetration = RobotPenetration(grid)
+    tracker = SoftTracker(penetration, SoftTrackingParams(n_particles=6))
+    rng = np.random.default_rng(5)
+    yaws = [0.0, 0.3, 0.3, 1.1, -0.7, 2.0, 0.3, 1.1]  # repeats share a slot
+    for k, yaw in enumerate(yaws):
+        ee = np.array([0.01 * k, 0.0, 0.0])
+        tracker.update(rng, ee, [ee + np.array([0.0, 0.011, 0.0])], [[0.004, 0.0, 0.0]],
+                       ee_rotation=rotation_about_z(yaw))  # fmt: skip
+    assert len(tracker._rotations) == 5
+    # Scatter the particles' points so that many (config, point) pairs penetrate.
+    n = tracker.n_contacts
+    tracker._points[:, :, :n] += rng.uniform(-0.015, 0.015, (3, 6, n)).astype(np.float32)
+    per_particle, per_point = tracker._penetration_all_pairs()
+
+    points, configs = tracker.points, tracker.configs
+    rotations = tracker._rotations[tracker._rotation_index[:, :n]]
+    tolerance = tracker.params.intersection_tolerance
+    expected = np.zeros((6, n))
+    for j in range(n):  # every config, with its own orientation, against every point
+        for i in range(6):
+            depth = penetration(configs[i, j], points[i], rotations[i, j])
+            expected[i] += np.maximum(depth - tolerance, 0.0)
+    assert expected.sum(axis=1).min() > 0.01  # every particle has penetrating pairs
+    np.testing.assert_allclose(per_point, expected, atol=1e-5)
+    np.testing.assert_allclose(per_particle, expected.sum(axis=1), atol=1e-4)

@@ -155,6 +155,8 @@ class RobotPenetration:
         skipped with NaN), and the caller takes the per-particle path.
         """
         n_particles, n_points = points_e.shape[1:]
+        if np.isnan(configs_e).any():  # NaN never equals itself, so grouping would fail anyway
+            return None
         point_states = self._distinct_states(points_e)
         config_states = self._distinct_states(configs_e)
         if point_states is None or config_states is None:
@@ -233,7 +235,8 @@ class RobotPenetration:
         crop_lo, crop_values, level = crop
         extent = np.array(crop_values.shape)
         grid = self.robot_sdf
-        if self.deduplicate and configs_e.shape[1] > 1:
+        # Grouping hashes every point: it pays off only against more than a few configs.
+        if self.deduplicate and configs_e.shape[1] > 1 and n_configs >= 8:
             sums = self._deduplicated_sums(points_e, configs_e, tolerance, crop)
             if sums is not None:
                 return sums

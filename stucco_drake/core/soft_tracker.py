@@ -263,7 +263,14 @@ class SoftTracker:
         per_point = np.zeros(points.shape[1:])
         for index, rotation in enumerate(self._rotations):  # one pass per distinct orientation
             in_group = self._rotation_index[:, :n] == index
-            group_configs = np.where(in_group, self._in_frame(rotation, configs), np.nan)
+            # Only the columns some particle holds in this orientation: a closed-loop run has
+            # about one orientation per action, so each pass checks a few configs, not all n.
+            columns = np.flatnonzero(in_group.any(axis=0))
+            if columns.size == 0:
+                continue
+            group_configs = np.where(
+                in_group[:, columns], self._in_frame(rotation, configs[:, :, columns]), np.nan
+            )
             a, b = self.penetration.excess_sums(
                 self._in_frame(rotation, points), group_configs.astype(np.float32), tolerance
             )
