@@ -155,9 +155,12 @@ def test_penetration_sums_over_many_orientations_equal_the_pairwise_depths():
         tracker.update(rng, ee, [ee + np.array([0.0, 0.011, 0.0])], [[0.004, 0.0, 0.0]],
                        ee_rotation=rotation_about_z(yaw))  # fmt: skip
     assert len(tracker._rotations) == 5
-    # Scatter the particles' points so that many (config, point) pairs penetrate.
+    # Scatter the particles' points so that many (config, point) pairs penetrate, and give
+    # each particle's pairs orientations of their own (as ReplaceBad's copies do), so a
+    # column holds several orientations across particles.
     n = tracker.n_contacts
     tracker._points[:, :, :n] += rng.uniform(-0.015, 0.015, (3, 6, n)).astype(np.float32)
+    tracker._rotation_index[:, :n] = rng.integers(0, 5, (6, n))
     per_particle, per_point = tracker._penetration_all_pairs()
 
     points, configs = tracker.points, tracker.configs
