@@ -37,8 +37,7 @@ def executor_grasp(bor: BorDiagram, simulator: Simulator, estimate):
         return False
     tracking = bor.tracking.GetMyContextFromRoot(simulator.get_context())
     points = bor.tracking.GetOutputPort("map_points").Eval(tracking)
-    labels = bor.tracking.GetOutputPort("segment_labels").Eval(tracking)
-    return grasp_estimate(bor.scene, simulator, estimate, points, labels, bor.target_shape)
+    return grasp_estimate(bor.scene, simulator, estimate, points, bor.target_shape)
 
 
 def action_stop_time(scene: SceneFile, k: int) -> float:

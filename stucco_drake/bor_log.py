@@ -264,7 +264,7 @@ def grasp_from_log(log: EpisodeLog, tracker):
         built.plant.GetMyMutableContextFromRoot(context), log.final_state
     )
     simulator.Initialize()
-    return grasp_estimate(built, simulator, estimate, points, labels, shape)
+    return grasp_estimate(built, simulator, estimate, points, shape)
 
 
 def grasp_success(log: EpisodeLog, tracker) -> bool:

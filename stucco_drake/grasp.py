@@ -205,19 +205,24 @@ def _finger_positions(built: BuiltScene, plant_context) -> tuple[float, float]:
                  for name in ("left_finger_joint", "right_finger_joint"))
 
 
-def grasp_estimate(built: BuiltScene, simulator: Simulator, estimate, points, labels,
+def grasp_estimate(built: BuiltScene, simulator: Simulator, estimate, points,
                    target_shape) -> GraspResult:
     """:func:`execute_grasp` at a :class:`~stucco_drake.core.target_pose.TargetPoseEstimate`.
 
     A cylinder is closed on first along the yaw that keeps the open fingers off the tracked
-    points of the other segments (``points``, (n, 3) m world, with segment ``labels``), then
-    along the other axes (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaws`).
+    points (``points``, (n, 3) m world, the tracker's, oldest first) that the estimate did
+    not fit as the target (by its ``labels`` and ``members``), then along the other axes
+    (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaws`).
     """
     context = simulator.get_context()
     X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
-    labels = np.asarray(labels)
-    yaws = cylinder_grasp_yaws((estimate.x, estimate.y),
-                               np.asarray(points)[~np.isin(labels, estimate.members)],
+    points = np.asarray(points)
+    fitted = np.zeros(len(points), dtype=bool)
+    # Points sensed after the estimate was made (a live estimate is not remade when no
+    # segment has enough points) were not fitted.
+    used = np.isin(estimate.labels, estimate.members)[: len(points)]
+    fitted[: len(used)] = used
+    yaws = cylinder_grasp_yaws((estimate.x, estimate.y), points[~fitted],
                                yaw_of(X_WG.rotation()))  # fmt: skip
     return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw),
                          target_shape, cylinder_yaws=yaws)  # fmt: skip

@@ -1,11 +1,18 @@
-"""The target-pose estimator's unions of two segments: a target cut in two by the segmentation."""
+"""The target-pose estimator's unions of two segments (a target cut in two by the segmentation)
+and its splits of a segment wider than the target (a target joined to a neighbour)."""
 
 import numpy as np
 import pytest
 
-from stucco_drake.core import BoxSdf
+from stucco_drake.core import BoxSdf, CylinderSdf
 from stucco_drake.core.icp import transform
-from stucco_drake.core.target_pose import estimate_target_pose, outline_extent, xy_extent
+from stucco_drake.core.segmentation import connected_components
+from stucco_drake.core.target_pose import (
+    estimate_target_pose,
+    outline_extent,
+    split_wider_segments,
+    xy_extent,
+)
 
 #: The BC target cracker box (half extents, m).
 CRACKER = BoxSdf((0.0329, 0.079, 0.1037))
@@ -172,3 +179,69 @@ def test_outline_misfit_is_judged_at_the_pooled_noise(seed):
     assert estimate.members == (2, 3)
     position, yaw = errors(estimate.pose, np.array([0.2502, 0.0498, 1.2082]))
     assert position < 0.035 and yaw < 25.0
+
+
+#: The TC target, the tomato can at 1.2 scale (m).
+TOMATO = CylinderSdf(radius=0.0384, half_height=0.06)
+
+#: Scene TC, seed 4, STUCCO (`cone`, touched-side rule at 5 mm), final tracked points (m,
+#: world), all in one segment: points 0-8 and 18-19 on the master chef can (20 cm across,
+#: pushed 12 cm), 9-17 on the target or touching nothing. The nearest target and can points
+#: lie 10 cm apart, under the segmentation's 13.5 cm radius. True target pose (0.2271, 0.0576).
+TC_TARGET_AND_CAN = np.array(
+    [
+        [0.1559, -0.0471, 0.1534], [0.1853, -0.0453, 0.1536], [0.1272, -0.1037, 0.1166],
+        [0.1394, -0.1150, 0.1168], [0.1257, -0.0995, 0.1777], [0.1178, -0.1189, 0.1071],
+        [0.1245, -0.1289, 0.1072], [0.1094, -0.1414, 0.1125], [0.1149, -0.1524, 0.1112],
+        [0.1827, 0.0489, 0.0724], [0.1843, 0.0436, 0.1156], [0.1840, 0.0471, 0.0878],
+        [0.1839, 0.0507, 0.1154], [0.1845, 0.0570, 0.0930], [0.1827, 0.0489, 0.0724],
+        [0.1836, 0.0550, 0.1120], [0.1902, 0.0243, 0.0819], [0.2057, 0.0270, 0.0665],
+        [0.1933, -0.1124, 0.1798], [0.1933, -0.1116, 0.1809],
+    ]
+)  # fmt: skip
+TC_TRUTH_XY = np.array([0.2271, 0.0576])
+
+
+def test_split_wider_segments():
+    """Two clumps 12 cm apart in one segment part at an 8 cm reach; the new part takes the
+    next free label. A chain of points 5 cm apart spanning 20 cm links throughout and keeps
+    its label, as do a narrow segment and noise (negative labels)."""
+    clump = np.array([[0.0, 0.0, 0.1], [0.02, 0.0, 0.1], [0.0, 0.02, 0.12]])
+    chain = np.column_stack([np.linspace(0.5, 0.7, 5), np.zeros(5), np.full(5, 0.1)])
+    far = clump + np.array([0.12, 0.0, 0.0])
+    points = np.vstack([clump, far, chain, [[1.0, 1.0, 0.1]], [[2.0, 0, 0]]])
+    labels = np.array([3, 3, 3, 3, 3, 3, 0, 0, 0, 0, 0, 5, -1])
+    split = split_wider_segments(points, labels, 0.08)
+    assert split.tolist() == [3, 3, 3, 6, 6, 6, 0, 0, 0, 0, 0, 5, -1]
+    assert labels.tolist() == [3, 3, 3, 3, 3, 3, 0, 0, 0, 0, 0, 5, -1]  # not modified
+    assert split_wider_segments(points, labels, 0.15).tolist() == labels.tolist()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_split_frees_a_target_the_segmentation_joined_to_a_can(seed):
+    """Fitted whole, the 20-point cloud draws the 7.7 cm can 11-12 cm from where it stands;
+    split at the can's reach (its diameter plus 3 noise widths), the target's own part is
+    chosen and the estimate is within 1.5 cm. Linked in plan only, the two cans' points
+    would chain (a can point above the target's contacts' height overlaps them in plan), so
+    the parts link in 3-D as the segmentation does."""
+    labels = np.zeros(len(TC_TARGET_AND_CAN), dtype=np.int64)
+    whole = estimate_target_pose(
+        np.random.default_rng(seed), TC_TARGET_AND_CAN, labels, TOMATO, split_segments=False
+    )
+    split = estimate_target_pose(np.random.default_rng(seed), TC_TARGET_AND_CAN, labels, TOMATO)
+    assert np.linalg.norm(whole.pose[:2] - TC_TRUTH_XY) > 0.08
+    assert np.linalg.norm(split.pose[:2] - TC_TRUTH_XY) < 0.015
+    reach = outline_extent(TOMATO) + 3 * 0.002
+    assert xy_extent(TC_TARGET_AND_CAN) > reach
+    assert split.labels.tolist() == [0] * 9 + [1] * 9 + [0] * 2
+    assert split.members == (1,) and len(split.segments) == 2
+    assert connected_components(TC_TARGET_AND_CAN[:, :2], reach).max() == 0
+    assert whole.labels.tolist() == labels.tolist()
+
+
+def test_paper_rule_never_splits():
+    labels = np.zeros(len(TC_TARGET_AND_CAN), dtype=np.int64)
+    estimate = estimate_target_pose(
+        np.random.default_rng(0), TC_TARGET_AND_CAN, labels, TOMATO, selection="paper"
+    )
+    assert estimate.labels.tolist() == labels.tolist() and len(estimate.segments) == 1
