@@ -6,13 +6,9 @@ import pytest
 
 from stucco_drake.core import BoxSdf, CylinderSdf
 from stucco_drake.core.icp import transform
+from stucco_drake.core.segment_extent import outline_extent, split_wider_segments, xy_extent
 from stucco_drake.core.segmentation import connected_components
-from stucco_drake.core.target_pose import (
-    estimate_target_pose,
-    outline_extent,
-    split_wider_segments,
-    xy_extent,
-)
+from stucco_drake.core.target_pose import estimate_target_pose
 
 #: The BC target cracker box (half extents, m).
 CRACKER = BoxSdf((0.0329, 0.079, 0.1037))
