@@ -216,13 +216,10 @@ def grasp_estimate(built: BuiltScene, simulator: Simulator, estimate, points,
     """
     context = simulator.get_context()
     X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
-    points = np.asarray(points)
-    fitted = np.zeros(len(points), dtype=bool)
     # Points sensed after the estimate was made (a live estimate is not remade when no
-    # segment has enough points) were not fitted.
-    used = np.isin(estimate.labels, estimate.members)[: len(points)]
-    fitted[: len(used)] = used
-    yaws = cylinder_grasp_yaws((estimate.x, estimate.y), points[~fitted],
+    # segment has enough points) lie beyond its labels and were not fitted: they stay.
+    fitted = np.flatnonzero(np.isin(estimate.labels, estimate.members))
+    yaws = cylinder_grasp_yaws((estimate.x, estimate.y), np.delete(points, fitted, axis=0),
                                yaw_of(X_WG.rotation()))  # fmt: skip
     return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw),
                          target_shape, cylinder_yaws=yaws)  # fmt: skip
