@@ -160,6 +160,31 @@ def test_small_table_writes_layout_and_figure_and_resumes(tmp_path):
     assert again == rows and (tmp_path / "logs" / "SYNC_1.npz").stat().st_mtime_ns == stamp
 
 
+def test_a_table_folder_refuses_rows_of_another_setting(tmp_path):
+    from stucco_drake.core.params import SoftTrackingParams
+
+    with cf.ThreadPoolExecutor(1) as executor:
+        rows = make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False)
+        assert len(rows) == 1
+        config = (tmp_path / "table_config.yaml").read_text()
+        assert "dx_model: ee" in config and "length: 0.02" in config
+        with pytest.raises(ValueError, match=r"--dx-model ee, not normal") as error:
+            make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
+                       dx_model="normal")
+        assert "\n" not in str(error.value)
+        longer = SoftTrackingParams.from_mapping({"length": 0.04})
+        with pytest.raises(ValueError, match=r"STUCCO's length = 0.02, not 0.04"):
+            make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
+                       stucco_params=longer)
+        # The same setting resumes; Table I given explicitly is the same setting as None.
+        again = make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
+                           stucco_params=SoftTrackingParams.sim())
+    assert again == rows
+    (tmp_path / "table_config.yaml").write_text("[1, 2]\n")
+    with pytest.raises(ValueError, match="is not a table config"):
+        make_table(["SYN2"], ["dbscan"], 1, tmp_path, cf.ThreadPoolExecutor(1), progress=False)
+
+
 def test_bad_names_raise_naming_them(capsys, tmp_path):
     with pytest.raises(ValueError, match=r"'FOO'.*'optics'") as error:
         check_names(["SYN2", "FOO"], ["stucco", "optics"])

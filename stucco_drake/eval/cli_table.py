@@ -16,6 +16,8 @@ import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+import yaml
+
 from stucco_drake.core.baselines import TRACKER_NAMES
 from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
 from stucco_drake.core.params import SoftTrackingParams
@@ -115,6 +117,44 @@ def simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
         ) from error
 
 
+#: What ``OUT/table_config.yaml`` records: the settings every row of OUT was made with.
+TABLE_CONFIG = "table_config.yaml"
+
+
+def check_table_config(out: Path, dx_model: str,
+                       stucco_params: SoftTrackingParams | None) -> None:  # fmt: skip
+    """Records in ``OUT/table_config.yaml`` the contact motion and STUCCO's full parameters
+    (Table I when None) the rows of ``out`` are made with, or, when the file exists, checks
+    that they are the same: rows are keyed by scene, seed and method only, so rows of two
+    settings in one folder would pass for each other. ValueError naming the first setting
+    that differs."""
+    params = stucco_params if stucco_params is not None else SoftTrackingParams.sim()
+    config = {"dx_model": dx_model, "stucco_params": params.to_mapping()}
+    config = yaml.safe_load(yaml.safe_dump(config))  # as it reads back: lists, plain floats
+    path = Path(out) / TABLE_CONFIG
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("# the settings every row of runs.csv here was made with\n"
+                        + yaml.safe_dump(config, sort_keys=False), encoding="utf-8")
+        return
+    try:
+        recorded = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError:
+        recorded = None
+    if not isinstance(recorded, dict) or set(recorded) != set(config):
+        raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params)")
+    if recorded["dx_model"] != dx_model:
+        raise ValueError(f"{path}: the rows here were made with --dx-model "
+                         f"{recorded['dx_model']}, not {dx_model}; use another --out")
+    old = recorded["stucco_params"] if isinstance(recorded["stucco_params"], dict) else {}
+    # A field added to the parameters since the file was written counts at its default.
+    defaults = yaml.safe_load(yaml.safe_dump(SoftTrackingParams.sim().to_mapping()))
+    for name, value in config["stucco_params"].items():
+        if old.get(name, defaults[name]) != value:
+            raise ValueError(f"{path}: the rows here were made with STUCCO's {name} = "
+                             f"{old.get(name)!r}, not {value!r}; use another --out")
+
+
 def make_table(
     scenes: Sequence[str],
     methods: Sequence[str],
@@ -131,13 +171,15 @@ def make_table(
     ``sources`` maps each scene name to its :class:`EpisodeSource`; ``dx_model`` is how every
     method moves contact points (see :func:`~stucco_drake.eval.replay.replay`) and
     ``stucco_params`` STUCCO's parameters (None: Table I); keep one of each per OUT folder:
-    rows are keyed by scene, seed and method only. Returns the table's rows (from
+    rows are keyed by scene, seed and method only, and :func:`check_table_config` refuses
+    another setting in a folder that holds one. Returns the table's rows (from
     ``OUT/runs.csv``, including runs of earlier calls).
     """
     check_names(scenes, methods, sources)
     if runs < 1:
         raise ValueError(f"runs must be positive, got {runs}")
     out = Path(out)
+    check_table_config(out, dx_model, stucco_params)
     results = RunResults(out / "runs.csv")
     replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources),
                                     dx_model=dx_model, stucco_params=stucco_params)
