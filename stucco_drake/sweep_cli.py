@@ -69,6 +69,13 @@ def run_sweep_command(args: argparse.Namespace,
           f"{tuned['n_trials']} trials: median FMI {tuned['median_fmi']:.3f}, median CE "
           f"{tuned['median_ce_cm']:.2f} cm; ambiguous (>= {AMBIGUOUS}, {amb['n_runs']} runs): "
           f"median FMI {amb['median_fmi']:.3f}, median CE {amb['median_ce_cm']:.2f} cm")
+    for entry in tuned["combinations"]:
+        gap = entry.get("ce_gap_to_tuned")
+        gap_text = ("" if gap is None else f"; median CE {gap['gap']:+.2f} cm against the tuned "
+                    f"(95 % interval {gap['low']:+.2f} to {gap['high']:+.2f}, lower on "
+                    f"{gap['n_lower']} of {gap['n']} trials)")
+        print(f"  {entry['params']}: median FMI {entry['median_fmi']:.3f}, median CE "
+              f"{entry['median_ce_cm']:.2f} cm{gap_text}")
     print(f"written {tuned_path(args.out, args.method, args.dx_model)} and "
           f"{args.out}/sweep.csv")
     return 0

@@ -184,6 +184,14 @@ def test_sweep_picks_the_best_combination_and_resumes(tmp_path):
     assert tuned["ambiguous"]["n_runs"] == 2 and tuned["ambiguous"]["threshold"] == 0.3
     worse = next(c for c in tuned["combinations"] if c["params"]["eps"] == 0.5)
     assert worse["median_fmi"] < 0.9
+    # Each combination's median CE against the tuned one's, paired on the 2 kept trials.
+    chosen = next(c for c in tuned["combinations"] if c["params"]["eps"] == 0.05)
+    assert chosen["ce_gap_to_tuned"] == {"gap": 0.0, "low": 0.0, "high": 0.0, "n": 2,
+                                         "n_lower": 0}  # fmt: skip
+    gap = worse["ce_gap_to_tuned"]
+    assert gap["n"] == 2 and gap["gap"] == pytest.approx(worse["median_ce_cm"]
+                                                         - chosen["median_ce_cm"])
+    assert gap["gap"] > 1.0 and 0.0 < gap["low"] <= gap["high"]  # merged boxes: cm off
     assert yaml.safe_load((tmp_path / "tuned_dbscan.yaml").read_text()) == tuned
     lines = (tmp_path / "sweep.csv").read_text().splitlines()
     assert len(lines) == 1 + 4

@@ -4,7 +4,12 @@ Nothing in this package imports Drake, so it is testable in milliseconds without
 """
 
 from stucco_drake.core.dynamics import TranslationDynamics
-from stucco_drake.core.metrics import ambiguity, contact_error, fowlkes_mallows
+from stucco_drake.core.metrics import (
+    ambiguity,
+    contact_error,
+    fowlkes_mallows,
+    paired_median_gap,
+)
 from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.core.penetration import RobotPenetration
@@ -30,4 +35,5 @@ __all__ = [
     "contact_error",
     "estimate_target_pose",
     "fowlkes_mallows",
+    "paired_median_gap",
 ]

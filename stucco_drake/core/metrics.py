@@ -89,3 +89,30 @@ def ambiguity(robot_object_distances, in_contact) -> float:
     second = np.sort(distances, axis=1)[:, 1]
     per_step = np.maximum(0.0, AMBIGUITY_DISTANCE - second) / AMBIGUITY_DISTANCE
     return float(per_step[in_contact].mean())
+
+
+def paired_median_gap(values, reference, rng: np.random.Generator,
+                      n_boot: int = 2000) -> dict:  # fmt: skip
+    """How much larger the median of ``values`` is than that of ``reference``, paired by trial.
+
+    ``values[i]`` and ``reference[i]`` are two settings' results on trial i (e.g. CE in cm);
+    trials where either is not finite are dropped. The gap is median(values) -
+    median(reference); its 95 % interval is the percentile interval of that gap over
+    ``n_boot`` resamples of the trials (with replacement, the same trials for both, drawn
+    from ``rng``). Returns ``gap``, ``low``, ``high``, ``n`` (paired trials) and ``n_lower``
+    (trials on which ``values`` is lower). An interval that holds 0 means the trials do not
+    tell the two medians apart.
+    """
+    a = np.asarray(values, dtype=np.float64).ravel()
+    b = np.asarray(reference, dtype=np.float64).ravel()
+    if a.shape != b.shape:
+        raise ValueError(f"paired_median_gap: {a.size} values against {b.size} references")
+    keep = np.isfinite(a) & np.isfinite(b)
+    a, b = a[keep], b[keep]
+    if a.size == 0:
+        raise ValueError("paired_median_gap: no trial with both values finite")
+    draws = rng.integers(0, a.size, size=(n_boot, a.size))
+    gaps = np.median(a[draws], axis=1) - np.median(b[draws], axis=1)
+    low, high = np.percentile(gaps, [2.5, 97.5])
+    return {"gap": float(np.median(a) - np.median(b)), "low": float(low), "high": float(high),
+            "n": int(a.size), "n_lower": int(np.count_nonzero(a < b))}

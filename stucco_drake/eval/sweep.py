@@ -35,6 +35,7 @@ from stucco_drake.core.baselines import (
     KMeansParams,
 )
 from stucco_drake.core.contact_motion import DX_MODELS
+from stucco_drake.core.metrics import paired_median_gap
 from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.eval.cli_table import (
     check_names,
@@ -71,6 +72,9 @@ DEFAULT_GRIDS = {
     "gmphd": {"detection": (0.1, 0.3, 0.5)},
 }
 assert set(PARAMS_CLASSES) == set(TRACKER_NAMES) == set(DEFAULT_GRIDS)
+#: Seed of the bootstrap behind each combination's median-CE gap to the tuned one: fixed, so
+#: the same ``sweep.csv`` always gives the same tuned file.
+GAP_SEED = 0
 
 Sources = Mapping[str, EpisodeSource]
 Grid = dict[str, tuple]
@@ -235,6 +239,28 @@ def best_combination(summary: Sequence[dict]) -> dict:
     return min(summary, key=key)  # min keeps the first of equal keys: grid order breaks ties
 
 
+def add_ce_gaps(summary: Sequence[dict], rows: Sequence[dict], best: dict, method: str,
+                dx_model: str = "ee", seed: int = GAP_SEED) -> None:  # fmt: skip
+    """Gives every summary entry ``ce_gap_to_tuned``: how much its median CE (cm) lies above
+    the tuned combination's, paired by trial, with a bootstrap 95 % interval
+    (:func:`~stucco_drake.core.metrics.paired_median_gap`; None without a common trial). The
+    medians of neighbouring settings are often within noise of each other: an interval that
+    holds 0 says the training set does not rank the two."""
+    ce = {}
+    for row in rows:
+        ce.setdefault(row["method"], {})[(row["scene"], row["seed"])] = row["ce_cm"]
+    reference = ce.get(combination_label(method, best["params"], dx_model), {})
+    rng = np.random.default_rng(seed)
+    for entry in summary:
+        mine = ce.get(combination_label(method, entry["params"], dx_model), {})
+        trials = sorted(set(mine) & set(reference))
+        try:
+            entry["ce_gap_to_tuned"] = paired_median_gap(
+                [mine[t] for t in trials], [reference[t] for t in trials], rng)
+        except ValueError:  # no trial with both finite
+            entry["ce_gap_to_tuned"] = None
+
+
 def _plain(value):
     """YAML-safe copy: tuples as lists, numpy scalars as Python numbers."""
     if isinstance(value, Mapping):
@@ -359,6 +385,7 @@ def run_sweep(
     rows = [r for r in results.rows() if (r["scene"], r["seed"], r["method"]) in keys]
     summary = summarize(rows, method, combos, dx_model)
     best = best_combination(summary)
+    add_ce_gaps(summary, rows, best, method, dx_model)
     tuned = write_tuned(tuned_path(out, method, dx_model), method, best, summary, scenes,
                         len(wanted), len(kept), dx_model)  # fmt: skip
     training_summary(out)
