@@ -172,6 +172,9 @@ def test_a_table_folder_refuses_rows_of_another_setting(tmp_path):
             make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
                        dx_model="normal")
         assert "\n" not in str(error.value)
+        with pytest.raises(ValueError, match=r"--filter-stream 0, not 2"):
+            make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
+                       filter_stream=2)
         longer = SoftTrackingParams.from_mapping({"length": 0.04})
         with pytest.raises(ValueError, match=r"STUCCO's length = 0.02, not 0.04"):
             make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
@@ -183,6 +186,30 @@ def test_a_table_folder_refuses_rows_of_another_setting(tmp_path):
     (tmp_path / "table_config.yaml").write_text("[1, 2]\n")
     with pytest.raises(ValueError, match="is not a table config"):
         make_table(["SYN2"], ["dbscan"], 1, tmp_path, cf.ThreadPoolExecutor(1), progress=False)
+
+
+def test_another_filter_stream_redraws_stucco_and_leaves_the_baselines(tmp_path):
+    rows = {}
+    with cf.ThreadPoolExecutor(2) as executor:
+        for stream in (0, 1):
+            out = tmp_path / f"stream{stream}"
+            if stream:  # the same episodes: a stream redraws the filter, not the world
+                out.mkdir()
+                (out / "logs").symlink_to(tmp_path / "stream0" / "logs")
+            found = make_table(["SYNC"], ["stucco", "dbscan"], 2, out, executor,
+                               progress=False, filter_stream=stream)
+            rows[stream] = {(r["seed"], r["method"]): r for r in found}
+        with pytest.raises(ValueError, match="filter_stream must be 0 or more"):
+            make_table(["SYNC"], ["dbscan"], 1, tmp_path / "bad", executor, progress=False,
+                       filter_stream=-1)
+    assert "filter_stream: 1" in (tmp_path / "stream1" / "table_config.yaml").read_text()
+    for seed in (0, 1):
+        a, b = rows[0][(seed, "dbscan")], rows[1][(seed, "dbscan")]
+        assert (a["ce_cm"], a["fmi"]) == (b["ce_cm"], b["fmi"])  # DBSCAN draws nothing
+    # STUCCO's particle filter draws: on SYNC's random clutter another stream moves its CE.
+    assert any(rows[0][(seed, "stucco")]["ce_cm"] != rows[1][(seed, "stucco")]["ce_cm"]
+               for seed in (0, 1))  # fmt: skip
+    assert all(np.isfinite(r["ce_cm"]) for r in rows[1].values())
 
 
 def test_bad_names_raise_naming_them(capsys, tmp_path):

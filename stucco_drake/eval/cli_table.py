@@ -77,17 +77,24 @@ def replay_penetration(source: EpisodeSource, log: EpisodeLog, method: str, dx_m
     return penetration
 
 
+#: Stream K of a table seeds every tracker's generator with the episode's seed + K times this
+#: (stream 0, the default, with the episode's seed itself).
+STREAM_STRIDE = 1000
+
+
 def replay_cached(task: tuple[str, int, str], out: str, sources: Sources,
-                  dx_model: str = "ee", stucco_params: SoftTrackingParams | None = None) -> dict:
+                  dx_model: str = "ee", stucco_params: SoftTrackingParams | None = None,
+                  filter_stream: int = 0) -> dict:  # fmt: skip
     """One run (scene, seed, method) replayed from its cached log, with the scene source's
-    pxpen and grasp, contact motion ``dx_model`` and, for STUCCO, ``stucco_params`` (None:
-    the paper's Table I) (runs in a worker)."""
+    pxpen and grasp, contact motion ``dx_model``, for STUCCO ``stucco_params`` (None: the
+    paper's Table I), and the trackers' generator seeded by ``filter_stream`` (see
+    :data:`STREAM_STRIDE`) (runs in a worker)."""
     scene, seed, method = task
     log, source = load_cached_log(out, scene, seed), sources[scene]
     penetration = replay_penetration(source, log, method, dx_model)
     params = stucco_params if method == "stucco" else None
-    return replay(log, method, params=params, penetration=penetration, grasp=source.grasp,
-                  dx_model=dx_model)
+    return replay(log, method, seed=seed + STREAM_STRIDE * filter_stream, params=params,
+                  penetration=penetration, grasp=source.grasp, dx_model=dx_model)
 
 
 def simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
@@ -121,15 +128,16 @@ def simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
 TABLE_CONFIG = "table_config.yaml"
 
 
-def check_table_config(out: Path, dx_model: str,
-                       stucco_params: SoftTrackingParams | None) -> None:  # fmt: skip
-    """Records in ``OUT/table_config.yaml`` the contact motion and STUCCO's full parameters
-    (Table I when None) the rows of ``out`` are made with, or, when the file exists, checks
-    that they are the same: rows are keyed by scene, seed and method only, so rows of two
-    settings in one folder would pass for each other. ValueError naming the first setting
-    that differs."""
+def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingParams | None,
+                       filter_stream: int = 0) -> None:  # fmt: skip
+    """Records in ``OUT/table_config.yaml`` the contact motion, STUCCO's full parameters
+    (Table I when None) and the filter stream the rows of ``out`` are made with, or, when the
+    file exists, checks that they are the same: rows are keyed by scene, seed and method
+    only, so rows of two settings in one folder would pass for each other. ValueError naming
+    the first setting that differs."""
     params = stucco_params if stucco_params is not None else SoftTrackingParams.sim()
-    config = {"dx_model": dx_model, "stucco_params": params.to_mapping()}
+    config = {"dx_model": dx_model, "stucco_params": params.to_mapping(),
+              "filter_stream": int(filter_stream)}  # fmt: skip
     config = yaml.safe_load(yaml.safe_dump(config))  # as it reads back: lists, plain floats
     path = Path(out) / TABLE_CONFIG
     if not path.exists():
@@ -141,11 +149,18 @@ def check_table_config(out: Path, dx_model: str,
         recorded = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError:
         recorded = None
-    if not isinstance(recorded, dict) or set(recorded) != set(config):
-        raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params)")
+    required = {"dx_model", "stucco_params"}
+    if (not isinstance(recorded, dict) or not required <= set(recorded)
+            or not set(recorded) <= set(config)):  # fmt: skip
+        raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params"
+                         f" and optionally filter_stream)")
     if recorded["dx_model"] != dx_model:
         raise ValueError(f"{path}: the rows here were made with --dx-model "
                          f"{recorded['dx_model']}, not {dx_model}; use another --out")
+    if recorded.get("filter_stream", 0) != config["filter_stream"]:
+        raise ValueError(f"{path}: the rows here were made with --filter-stream "
+                         f"{recorded.get('filter_stream', 0)}, not {filter_stream}; "
+                         f"use another --out")
     old = recorded["stucco_params"] if isinstance(recorded["stucco_params"], dict) else {}
     # A field added to the parameters since the file was written counts at its default.
     defaults = yaml.safe_load(yaml.safe_dump(SoftTrackingParams.sim().to_mapping()))
@@ -165,12 +180,16 @@ def make_table(
     sources: Sources = SYNTHETIC_SOURCES,
     dx_model: str = "ee",
     stucco_params: SoftTrackingParams | None = None,
+    filter_stream: int = 0,
 ) -> list[dict]:
     """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
 
     ``sources`` maps each scene name to its :class:`EpisodeSource`; ``dx_model`` is how every
     method moves contact points (see :func:`~stucco_drake.eval.replay.replay`) and
-    ``stucco_params`` STUCCO's parameters (None: Table I); keep one of each per OUT folder:
+    ``stucco_params`` STUCCO's parameters (None: Table I) and ``filter_stream`` which draws
+    the trackers take (0: seeded with the episode's seed, as the paper's tables; K: another
+    stream of draws on the same episodes, see :data:`STREAM_STRIDE`); keep one of each per
+    OUT folder:
     rows are keyed by scene, seed and method only, and :func:`check_table_config` refuses
     another setting in a folder that holds one. Returns the table's rows (from
     ``OUT/runs.csv``, including runs of earlier calls).
@@ -178,11 +197,14 @@ def make_table(
     check_names(scenes, methods, sources)
     if runs < 1:
         raise ValueError(f"runs must be positive, got {runs}")
+    if filter_stream < 0:
+        raise ValueError(f"filter_stream must be 0 or more, got {filter_stream}")
     out = Path(out)
-    check_table_config(out, dx_model, stucco_params)
+    check_table_config(out, dx_model, stucco_params, filter_stream)
     results = RunResults(out / "runs.csv")
     replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources),
-                                    dx_model=dx_model, stucco_params=stucco_params)
+                                    dx_model=dx_model, stucco_params=stucco_params,
+                                    filter_stream=filter_stream)
     wanted = {(scene, seed, method) for seed in range(runs) for scene in scenes
               for method in methods}  # fmt: skip
 
@@ -219,6 +241,10 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES) -> None:
                        help=f"how contact points move ({DX_MODELS_SUMMARY})")
     table.add_argument("--stucco-params", metavar="PARAMS.yaml", default=None,
                        help="STUCCO's parameters as YAML overrides of Table I (default: Table I)")
+    table.add_argument("--filter-stream", type=int, default=0, metavar="K",
+                       help="seed the trackers with the episode's seed + K x "
+                            f"{STREAM_STRIDE} (default 0: the episode's seed); another K "
+                            "replays the same episodes with other draws")
     table.add_argument("--workers", type=int, default=None,
                        help="parallel workers (default: one per CPU)")
     table.add_argument("--executor", choices=("process", "dask"), default="process",
@@ -244,7 +270,8 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
         with executor:
             rows = make_table(args.scenes, args.methods, args.runs, args.out, executor,
                               sources=sources, dx_model=args.dx_model,
-                              stucco_params=stucco_params)
+                              stucco_params=stucco_params,
+                              filter_stream=args.filter_stream)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1
