@@ -135,10 +135,12 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
     file exists, checks that they are the same: rows are keyed by scene, seed and method
     only, so rows of two settings in one folder would pass for each other. ValueError naming
     the first setting that differs."""
+    def plain(mapping):  # as YAML reads it back: lists, plain floats
+        return yaml.safe_load(yaml.safe_dump(mapping))
+
     params = stucco_params if stucco_params is not None else SoftTrackingParams.sim()
-    config = {"dx_model": dx_model, "stucco_params": params.to_mapping(),
-              "filter_stream": int(filter_stream)}  # fmt: skip
-    config = yaml.safe_load(yaml.safe_dump(config))  # as it reads back: lists, plain floats
+    config = plain({"dx_model": dx_model, "stucco_params": params.to_mapping(),
+                    "filter_stream": int(filter_stream)})  # fmt: skip
     path = Path(out) / TABLE_CONFIG
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -149,25 +151,21 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
         recorded = yaml.safe_load(path.read_text(encoding="utf-8"))
     except yaml.YAMLError:
         recorded = None
-    required = {"dx_model", "stucco_params"}
-    if (not isinstance(recorded, dict) or not required <= set(recorded)
-            or not set(recorded) <= set(config)):  # fmt: skip
+    if (not isinstance(recorded, dict) or not {"dx_model", "stucco_params"} <= set(recorded)
+            or not set(recorded) <= set(config)
+            or not isinstance(recorded["stucco_params"], dict)):  # fmt: skip
         raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params"
                          f" and optionally filter_stream)")
-    if recorded["dx_model"] != dx_model:
-        raise ValueError(f"{path}: the rows here were made with --dx-model "
-                         f"{recorded['dx_model']}, not {dx_model}; use another --out")
-    if recorded.get("filter_stream", 0) != config["filter_stream"]:
-        raise ValueError(f"{path}: the rows here were made with --filter-stream "
-                         f"{recorded.get('filter_stream', 0)}, not {filter_stream}; "
-                         f"use another --out")
-    old = recorded["stucco_params"] if isinstance(recorded["stucco_params"], dict) else {}
-    # A field added to the parameters since the file was written counts at its default.
-    defaults = yaml.safe_load(yaml.safe_dump(SoftTrackingParams.sim().to_mapping()))
-    for name, value in config["stucco_params"].items():
-        if old.get(name, defaults[name]) != value:
-            raise ValueError(f"{path}: the rows here were made with STUCCO's {name} = "
-                             f"{old.get(name)!r}, not {value!r}; use another --out")
+    # What a file written before a setting existed lacks counts at that setting's default.
+    old_params = {**plain(SoftTrackingParams.sim().to_mapping()), **recorded["stucco_params"]}
+    settings = [("--dx-model ", recorded["dx_model"], dx_model),
+                ("--filter-stream ", recorded.get("filter_stream", 0), config["filter_stream"])]
+    settings += [(f"STUCCO's {name} = ", repr(old_params[name]), repr(value))
+                 for name, value in config["stucco_params"].items()]  # fmt: skip
+    for label, old, new in settings:
+        if old != new:
+            raise ValueError(f"{path}: the rows here were made with {label}{old}, not {new}; "
+                             f"use another --out")
 
 
 def make_table(
@@ -188,10 +186,9 @@ def make_table(
     method moves contact points (see :func:`~stucco_drake.eval.replay.replay`) and
     ``stucco_params`` STUCCO's parameters (None: Table I) and ``filter_stream`` which draws
     the trackers take (0: seeded with the episode's seed, as the paper's tables; K: another
-    stream of draws on the same episodes, see :data:`STREAM_STRIDE`); keep one of each per
-    OUT folder:
-    rows are keyed by scene, seed and method only, and :func:`check_table_config` refuses
-    another setting in a folder that holds one. Returns the table's rows (from
+    stream of draws on the same episodes, see :data:`STREAM_STRIDE`). Rows are keyed by
+    scene, seed and method only, so an OUT folder holds one of each: :func:`check_table_config`
+    refuses another setting in a folder that holds one. Returns the table's rows (from
     ``OUT/runs.csv``, including runs of earlier calls).
     """
     check_names(scenes, methods, sources)
