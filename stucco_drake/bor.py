@@ -20,10 +20,8 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from pydrake.common.value import AbstractValue
 from pydrake.geometry import Box, Cylinder
-from pydrake.math import RigidTransform
-from pydrake.multibody.plant import ContactResults, MultibodyPlant
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import MatrixGain
@@ -35,7 +33,11 @@ from stucco_drake.grasp import build_grasp_scene
 from stucco_drake.gripper_sdf import gripper_penetration
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
-from stucco_drake.systems.action_contacts_assembler import ActionContactsAssembler, TruthContact
+from stucco_drake.systems.action_contacts_assembler import (
+    ActionContactsAssembler,
+    TruthContact,
+    nearest_truth,
+)
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
 from stucco_drake.systems.contact_detector import (
     ContactDetector,
@@ -60,8 +62,9 @@ class BorDiagram:
         method, seed: the tracking method and the seed every random stream derives from.
         target_name, target_shape: the target object and its known shape in its own frame.
         penetration: the gripper's pxpen used by the tracker and the pose estimator.
-        estimator, detector, isolator, bubble_sensor, assembler, tracking, target_estimator,
-        truth: the systems.
+        estimator, detector, isolator, bubble_sensor, assembler, tracking, target_estimator:
+            the systems.
+        truth: the assembler's ground-truth labeller (:class:`RobotObjectContacts`).
     """
 
     diagram: Diagram
@@ -78,7 +81,7 @@ class BorDiagram:
     assembler: ActionContactsAssembler
     tracking: SoftTrackingFilter
     target_estimator: TargetPoseEstimator
-    truth: LeafSystem
+    truth: RobotObjectContacts
 
 
 # ------------------------------------------------------------------------- scene geometry
@@ -152,39 +155,21 @@ def object_surfaces(built: BuiltScene, plant_context) -> dict[str, list[PosedSur
     return surfaces
 
 
-# ------------------------------------------------------------------- observers of the plant
-class BodyPosesFromState(LeafSystem):
-    """Body poses (list of RigidTransform, indexed by BodyIndex) from the full plant state.
-
-    The bubble sensor needs the bubbles' poses, which the scene does not export; this
-    recomputes them by forward kinematics on a scratch context of the same plant.
-    """
-
-    def __init__(self, plant: MultibodyPlant):
-        super().__init__()
-        self._plant = plant
-        self._context = plant.CreateDefaultContext()
-        self._bodies = [plant.get_body(BodyIndex(i)) for i in range(plant.num_bodies())]
-        self._state = self.DeclareVectorInputPort("plant_state", plant.num_multibody_states())
-        self.DeclareAbstractOutputPort(
-            "body_poses", lambda: AbstractValue.Make([RigidTransform()]), self._calc
-        )
-
-    def _calc(self, context, output):
-        self._plant.SetPositionsAndVelocities(self._context, self._state.Eval(context))
-        output.set_value([b.EvalPoseInWorld(self._context) for b in self._bodies])
-
-
-class RobotObjectContacts(LeafSystem):
+# ------------------------------------------------------------------ ground truth for scoring
+class RobotObjectContacts:
     """Ground truth for evaluation: the robot's contacts with objects, from contact results.
 
-    Output ``truth_contacts``: list of :class:`TruthContact`, one per contact between a robot
-    body (arm or gripper) and an object body (m, world), the latter named as in
-    ``BuiltScene.free_bodies``/``welded_bodies``.
+    A :class:`~stucco_drake.systems.action_contacts_assembler.TruthLabeller` over the full
+    plant state: :meth:`contacts` puts a state into a scratch context of the scene's Diagram and
+    reads the plant's own contact results there, one :class:`TruthContact` per contact between
+    a robot body (arm or gripper) and an object body (m, world; a hydroelastic surface's
+    centroid or a point contact's point), the object named as in
+    ``BuiltScene.free_bodies``/``welded_bodies``. Where the contacts are depends on the
+    configuration alone, so the scratch context gives the same contacts as the simulation's
+    own at that state; the assembler asks once per completed action, not every step.
     """
 
     def __init__(self, built: BuiltScene):
-        super().__init__()
         plant = built.plant
         names = {b.index(): n for n, b in {**built.free_bodies, **built.welded_bodies}.items()}
         robot = {plant.GetModelInstanceByName(n) for n in (IIWA, GRIPPER)}
@@ -196,13 +181,10 @@ class RobotObjectContacts(LeafSystem):
                     self._robot_geometry.add(gid)
                 elif body.index() in names:
                     self._object_geometry[gid] = names[body.index()]
-        self._results = self.DeclareAbstractInputPort(
-            "contact_results", AbstractValue.Make(ContactResults())
-        )
-        self.DeclareAbstractOutputPort(
-            "truth_contacts", lambda: AbstractValue.Make([TruthContact("", np.zeros(3))]),
-            self._calc,
-        )  # fmt: skip
+        self._plant = plant
+        self._context = built.diagram.CreateDefaultContext()
+        self._plant_context = plant.GetMyMutableContextFromRoot(self._context)
+        self.state_size = plant.num_multibody_states()
 
     def _pair(self, a, b) -> str | None:
         if a in self._robot_geometry:
@@ -211,8 +193,10 @@ class RobotObjectContacts(LeafSystem):
             return self._object_geometry.get(a)
         return None
 
-    def _calc(self, context, output):
-        results = self._results.Eval(context)
+    def contacts(self, plant_state) -> list[TruthContact]:
+        """The robot-object contacts at ``plant_state`` (the plant's [q; v])."""
+        self._plant.SetPositionsAndVelocities(self._plant_context, plant_state)
+        results = self._plant.get_contact_results_output_port().Eval(self._plant_context)
         found = []
         for i in range(results.num_hydroelastic_contacts()):
             surface = results.hydroelastic_contact_info(i).contact_surface()
@@ -224,7 +208,11 @@ class RobotObjectContacts(LeafSystem):
             name = self._pair(info.point_pair().id_A, info.point_pair().id_B)
             if name is not None:
                 found.append(TruthContact(name, np.array(info.contact_point())))
-        output.set_value(found)
+        return found
+
+    def label(self, points, plant_state) -> tuple:
+        """The true contact nearest each of ``points`` (n, 3) at ``plant_state``."""
+        return nearest_truth(np.asarray(points, dtype=float), self.contacts(plant_state))
 
 
 class ActionClock(LeafSystem):
@@ -341,13 +329,11 @@ def build_bor_diagram(
         "gripper_pose", GripperPoseFromState(X_WB=X_WB, finger_positions=fingers)
     )
     builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
-    body_poses = builder.AddNamedSystem("body_poses", BodyPosesFromState(built.plant))
-    builder.Connect(sub.GetOutputPort("plant_state"), body_poses.GetInputPort("plant_state"))
     bubbles = builder.AddNamedSystem(
         "bubble_sensor", BubbleContactSensor(built.plant, built.scene_graph, h)
     )
     builder.Connect(sub.GetOutputPort("contact_results"), bubbles.GetInputPort("contact_results"))
-    builder.Connect(body_poses.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))
+    builder.Connect(sub.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))
 
     isolator = builder.AddNamedSystem("contact_isolator", ContactIsolator(
         h, seed=cpf_seed, opening=scene.gripper_start.finger_position, n_bubbles=2
@@ -358,17 +344,14 @@ def build_bor_diagram(
     for name in ("bubble_in_contact", "bubble_contact_points"):
         builder.Connect(bubbles.GetOutputPort(name), isolator.GetInputPort(name))
 
-    truth = builder.AddNamedSystem("ground_truth", RobotObjectContacts(built))
-    builder.Connect(sub.GetOutputPort("contact_results"), truth.GetInputPort("contact_results"))
-    assembler = builder.AddNamedSystem(
-        "action_contacts", ActionContactsAssembler(h, with_truth=True)
-    )
+    truth = RobotObjectContacts(built)
+    assembler = builder.AddNamedSystem("action_contacts", ActionContactsAssembler(h, truth=truth))
+    builder.Connect(sub.GetOutputPort("plant_state"), assembler.GetInputPort("truth_state"))
     for name in ("current_action", "completed_action"):
         builder.Connect(detector.GetOutputPort(name), assembler.GetInputPort(name))
     for name in ("has_contact", "contact_points"):
         builder.Connect(isolator.GetOutputPort(name), assembler.GetInputPort(name))
     builder.Connect(pose.GetOutputPort("gripper_pose"), assembler.GetInputPort("gripper_pose"))
-    builder.Connect(truth.GetOutputPort("truth_contacts"), assembler.GetInputPort("truth_contacts"))
 
     tracker = make_tracker(method, tracker_params, penetration)
     tracking = builder.AddNamedSystem("soft_tracking", SoftTrackingFilter(

@@ -33,10 +33,8 @@ class ScriptedSensing(LeafSystem):
                                        lambda: AbstractValue.Make([np.zeros(3)]), self._points)
         self.DeclareVectorOutputPort("gripper_pose", 7,
                                      lambda c, o: o.SetFromVector([c.get_time(), 0, 0, 1, 0, 0, 0]))
-        self.DeclareAbstractOutputPort(
-            "truth_contacts", lambda: AbstractValue.Make([TruthContact("", np.zeros(3))]),
-            lambda c, o: o.set_value([TruthContact("obj", self._point(c))]),
-        )  # fmt: skip
+        self.DeclareVectorOutputPort("truth_state", 3,
+                                     lambda c, o: o.SetFromVector(self._point(c)))
 
     @staticmethod
     def _k(context) -> int:
@@ -63,12 +61,26 @@ class ScriptedSensing(LeafSystem):
         output.set_value([self._point(context)] if self._touching(context) else [])
 
 
+class ScriptedTruth:
+    """Labels every point "obj" at the place the truth state gives; counts its calls."""
+
+    state_size = 3
+
+    def __init__(self):
+        self.calls = []
+
+    def label(self, points, truth_state):
+        self.calls.append(np.array(truth_state))
+        return tuple(TruthContact("obj", np.array(truth_state)) for _ in points)
+
+
 def test_assembler_latches_the_last_contact_of_each_action():
     builder = DiagramBuilder()
     source = builder.AddSystem(ScriptedSensing(in_contact_actions=[1, 3]))
-    assembler = builder.AddSystem(ActionContactsAssembler(H, with_truth=True))
+    labeller = ScriptedTruth()
+    assembler = builder.AddSystem(ActionContactsAssembler(H, truth=labeller))
     for name in ("current_action", "completed_action", "has_contact", "contact_points",
-                 "gripper_pose", "truth_contacts"):  # fmt: skip
+                 "gripper_pose", "truth_state"):  # fmt: skip
         builder.Connect(source.GetOutputPort(name), assembler.GetInputPort(name))
     simulator = Simulator(builder.Build())
     context = assembler.GetMyContextFromRoot(simulator.get_context())
@@ -82,6 +94,11 @@ def test_assembler_latches_the_last_contact_of_each_action():
     assert [len(seen[k].points) for k in range(4)] == [0, 1, 0, 1]
     # The point is the one of the action's last contact step (t just under k + 1).
     np.testing.assert_allclose(seen[1].points[0], [1.0, 2.0 - H, 0.0], atol=1e-9)
+    # Ground truth is asked for once per action with contact (not at each of its 50 contact
+    # steps), with the truth state of the step the point was latched at.
+    assert len(labeller.calls) == 2
+    np.testing.assert_allclose(labeller.calls[0], [1.0, 2.0 - H, 0.0], atol=1e-9)
+    np.testing.assert_allclose(labeller.calls[1], [3.0, 4.0 - H, 0.0], atol=1e-9)
     np.testing.assert_allclose(seen[3].dx, [[0.03, 0.0, 0.0]])
     # x_t is the gripper pose when the action completed: just after t = k + 1.
     x_t = assembler.GetOutputPort("ee_pose").Eval(context).translation()

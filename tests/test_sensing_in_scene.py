@@ -34,7 +34,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
-from stucco_drake.bor import BodyPosesFromState, _arm_selectors
+from stucco_drake.bor import _arm_selectors
 from stucco_drake.scenes import build_scene, load_scene_text
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
@@ -190,11 +190,9 @@ def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     builder.Connect(sub.GetOutputPort("action_index"), detector.GetInputPort("action_index"))
     pose = builder.AddSystem(GripperPoseFromState(X_WB=X_WB, finger_positions=fingers))
     builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
-    body_poses = builder.AddSystem(BodyPosesFromState(built.plant))
-    builder.Connect(sub.GetOutputPort("plant_state"), body_poses.GetInputPort("plant_state"))
     bubbles = builder.AddSystem(BubbleContactSensor(built.plant, built.scene_graph, h))
     builder.Connect(sub.GetOutputPort("contact_results"), bubbles.GetInputPort("contact_results"))
-    builder.Connect(body_poses.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))
+    builder.Connect(sub.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))
     truth = builder.AddSystem(GripperObjectContacts(built))
     builder.Connect(sub.GetOutputPort("contact_results"), truth.get_input_port())
     logs = {

@@ -17,6 +17,7 @@ Exported ports (robot vectors use the robot-only plant's ordering, see ``BuiltSc
     output ``desired_state``: the joint command [q; v].
     output ``planar_goal``: (x, y) the current action moves the gripper frame to (m, world).
     output ``plant_state``: the full plant state; ``contact_results``; ``query_object``.
+    output ``body_poses``: the plant's body poses (list of RigidTransform, by BodyIndex).
     output ``action_index`` (only with the built-in action sequence).
 """
 
@@ -333,6 +334,7 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
     builder.ExportOutput(ctrl.GetOutputPort("planar_goal"), "planar_goal")
     builder.ExportOutput(plant.get_state_output_port(), "plant_state")
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
+    builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
     builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)

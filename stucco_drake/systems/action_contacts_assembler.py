@@ -3,11 +3,16 @@
 It joins what the detector and the isolator report step by step into what the tracker takes
 once per action (paper Algorithm 1): the contact point(s) p_t, the end-effector displacement
 while in contact dx_t and the end-effector pose x_t at the end of the action.
+
+Ground truth for scoring (optional) is taken where scoring needs it: the assembler copies a
+``truth_state`` vector (e.g. the plant's state) at each step whose points it latches, and asks a
+:class:`TruthLabeller` for the true contacts once per completed action, never every step.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from typing import Protocol
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -33,13 +38,37 @@ class TruthContact:
     point: np.ndarray
 
 
+class TruthLabeller(Protocol):
+    """Names the true contact behind each sensed point, from a snapshot of the world's state.
+
+    ``state_size`` is the length of the ``truth_state`` vector the assembler copies at the step
+    a point is sensed; ``label(points, truth_state)`` returns one :class:`TruthContact` per row
+    of ``points`` ((n, 3), m, world): the true contact nearest it in the world described by
+    ``truth_state`` (name "" and a NaN point when the robot touched nothing there).
+    """
+
+    state_size: int
+
+    def label(self, points: np.ndarray, truth_state: np.ndarray) -> tuple: ...
+
+
+def nearest_truth(points: np.ndarray, truth: list) -> tuple:
+    """For each of ``points`` (n, 3) the :class:`TruthContact` of ``truth`` nearest to it (by
+    Euclidean distance, m), or ("" , NaN) for every point when ``truth`` is empty."""
+    if not truth:
+        return (TruthContact("", np.full(3, np.nan)),) * len(points)
+    where = np.array([t.point for t in truth]).reshape(-1, 3)
+    nearest = np.linalg.norm(points[:, None] - where[None], axis=2).argmin(axis=1)
+    return tuple(truth[i] for i in nearest)
+
+
 @dataclasses.dataclass(frozen=True)
 class _AssemblerState:
     """What the assembler keeps (replaced, never mutated, by each update)."""
 
     action_index: int = -1  # the action under way, as the detector reports it
     latched: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
-    latched_truth: tuple = ()  # TruthContact per latched point
+    latched_truth: np.ndarray | None = None  # truth_state copied when the points were latched
     completed: ActionContacts = dataclasses.field(default_factory=ActionContacts)
     completed_truth: tuple = ()
     ee_pose: RigidTransform = dataclasses.field(default_factory=RigidTransform)
@@ -67,22 +96,25 @@ class ActionContactsAssembler(LeafSystem):
         has_contact: (1,) the isolator's flag (> 0.5: this step isolated a contact).
         contact_points: the isolator's list of (3,) world points (m) of this step.
         gripper_pose: (7,) [x, y, z, qw, qx, qy, qz] of ``gripper_frame`` (m, world; w-first).
-        truth_contacts (only with ``with_truth``): list of :class:`TruthContact` of this step.
+        truth_state (only with ``truth``): (truth.state_size,) the vector the labeller reads,
+            copied at each step whose points are latched.
 
     Output ports:
         action_contacts: :class:`ActionContacts` of the last completed action (action_index -1
             before the first); points (m, 3) and dx (m, 3) in m, world.
         ee_pose: RigidTransform X_WG of ``gripper_frame`` when that action completed.
-        action_truth (only with ``with_truth``): tuple of :class:`TruthContact`, one per point
+        action_truth (only with ``truth``): tuple of :class:`TruthContact`, one per point
             of ``action_contacts``: the true contact nearest that point at the step it was
-            latched (name "" and a NaN point when the robot touched nothing then).
+            latched (name "" and a NaN point when the robot touched nothing then), labelled
+            by ``truth`` once, when the action completes.
     """
 
-    def __init__(self, time_step: float, *, with_truth: bool = False):
+    def __init__(self, time_step: float, *, truth: TruthLabeller | None = None):
         super().__init__()
         if not (np.isfinite(time_step) and time_step > 0):
             raise ValueError(f"ActionContactsAssembler: time_step must be > 0, got {time_step}")
-        self._with_truth = bool(with_truth)
+        self._truth_labeller = truth
+        self._with_truth = truth is not None
         self._current = self.DeclareAbstractInputPort(
             "current_action", AbstractValue.Make(ActionContact())
         )
@@ -95,9 +127,7 @@ class ActionContactsAssembler(LeafSystem):
         )
         self._pose = self.DeclareVectorInputPort("gripper_pose", 7)
         if self._with_truth:
-            self._truth = self.DeclareAbstractInputPort(
-                "truth_contacts", AbstractValue.Make([TruthContact("", np.zeros(3))])
-            )
+            self._truth = self.DeclareVectorInputPort("truth_state", int(truth.state_size))
         self._state = self.DeclareAbstractState(AbstractValue.Make(_AssemblerState()))
         ticket = {self.abstract_state_ticket(self._state)}
         self.DeclareAbstractOutputPort(
@@ -123,14 +153,6 @@ class ActionContactsAssembler(LeafSystem):
         actions the detector flagged but the isolator never localised."""
         return context.get_abstract_state(self._state).get_value()
 
-    def _label(self, context, points: np.ndarray) -> tuple:
-        truth = self._truth.Eval(context)
-        if not truth:
-            return (TruthContact("", np.full(3, np.nan)),) * len(points)
-        where = np.array([t.point for t in truth]).reshape(-1, 3)
-        nearest = np.linalg.norm(points[:, None] - where[None], axis=2).argmin(axis=1)
-        return tuple(truth[i] for i in nearest)
-
     def _update(self, context, state):
         old = self.assembler_state(context)
         new = old
@@ -139,12 +161,13 @@ class ActionContactsAssembler(LeafSystem):
             if old.action_index >= 0:
                 new = self._complete(context, old)
             new = dataclasses.replace(
-                new, action_index=current.action_index, latched=np.zeros((0, 3)), latched_truth=()
+                new, action_index=current.action_index, latched=np.zeros((0, 3)), latched_truth=None
             )
         if self._has_contact.Eval(context)[0] > 0.5:
             points = np.array(self._points.Eval(context), dtype=float).reshape(-1, 3)
             if len(points):
-                truth = self._label(context, points) if self._with_truth else ()
+                # A snapshot, not the labels: labelling waits for the action's end.
+                truth = self._truth.Eval(context).copy() if self._with_truth else None
                 new = dataclasses.replace(new, latched=points, latched_truth=truth)
         if new is not old:
             state.get_mutable_abstract_state(self._state).set_value(new)
@@ -161,8 +184,10 @@ class ActionContactsAssembler(LeafSystem):
         points, truth = np.zeros((0, 3)), ()
         missed = old.detected_without_point
         if done.in_contact:
-            points, truth = old.latched, old.latched_truth
+            points = old.latched
             missed += not len(points)
+            if len(points) and self._with_truth:
+                truth = tuple(self._truth_labeller.label(points, old.latched_truth))
         dx = np.tile(np.asarray(done.dx, dtype=float).reshape(1, 3), (len(points), 1))
         return dataclasses.replace(
             old,
@@ -173,4 +198,4 @@ class ActionContactsAssembler(LeafSystem):
         )
 
 
-__all__ = ["ActionContactsAssembler", "TruthContact"]
+__all__ = ["ActionContactsAssembler", "TruthContact", "TruthLabeller", "nearest_truth"]

@@ -118,7 +118,10 @@ class BubbleContactSensor(LeafSystem):
         return calc
 
     def measure(self, results: ContactResults, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(penetration (n,), point (n, 3), pressure x area (n,)) of each bubble, no noise."""
+        """(penetration (n,), point (n, 3), pressure x area (n,)) of each bubble, no noise.
+
+        ``poses`` is the body poses' list, or a callable returning it (asked for only when a
+        bubble has a hydroelastic contact: most steps have none)."""
         n = self._n
         depth, moment, weight = np.zeros(n), np.zeros((n, 3)), np.zeros(n)
         for i in range(results.num_hydroelastic_contacts()):
@@ -128,6 +131,8 @@ class BubbleContactSensor(LeafSystem):
                 if b is None:
                     continue
                 _, body, X_BG, radii, _ = self._bubbles[b]
+                if callable(poses):
+                    poses = poses()
                 centroid, total, vertices = _surface_moments(surface)
                 X_GW = poses[body].multiply(X_BG).inverse()
                 local = vertices @ X_GW.rotation().matrix().T + X_GW.translation()
@@ -152,7 +157,8 @@ class BubbleContactSensor(LeafSystem):
     def _update(self, context, discrete_state):
         old = context.get_discrete_state(self._xd).get_value()
         step = int(old[0]) + 1
-        depth, points, _ = self.measure(self._results.Eval(context), self._poses.Eval(context))
+        depth, points, _ = self.measure(self._results.Eval(context),
+                                        lambda: self._poses.Eval(context))
         fires = depth > self._threshold
         if self._noise_std > 0:
             rng = np.random.default_rng([self._noise_seed, step])

@@ -153,8 +153,9 @@ class _IsolatorState:
     points_W: tuple = ()
     cost: float = 0.0
     source: float = SOURCE_NONE
-    spread: float = 0.0  # m, the rival distance of line_of_action_ambiguity
-    ambiguous: bool = False
+    # What line_of_action_ambiguity needs, for a CPF point: (torque (N m) and fitted force (N)
+    # in G, sample index). The spread is computed only when its output is asked for.
+    line_of_action: tuple | None = None
     # Sum of the CPF contact's wrenches [torque (N m); force (N)] in G and their count, for the
     # running mean (average_wrench); None outside a CPF contact.
     wrench_sum: np.ndarray | None = None
@@ -270,8 +271,9 @@ class ContactIsolator(LeafSystem):
             ("contact_point_gripper", 3, lambda s: s.point_G),
             ("isolation_cost", 1, lambda s: [s.cost]),
             ("contact_source", 1, lambda s: [s.source]),
-            ("contact_spread", 1, lambda s: [s.spread]),
-            ("contact_ambiguous", 1, lambda s: [float(s.ambiguous)]),
+            ("contact_spread", 1, lambda s: [self._spread(s)]),
+            ("contact_ambiguous", 1,
+             lambda s: [float(self._spread(s) > self._ambiguity_distance)]),
         ):
             self.DeclareVectorOutputPort(name, size, self._make_output(get),
                                          prerequisites_of_calc=ticket)  # fmt: skip
@@ -295,14 +297,28 @@ class ContactIsolator(LeafSystem):
     def _read(self, context, port) -> np.ndarray:
         return eval_finite("ContactIsolator", context, port)
 
+    def _spread(self, state: _IsolatorState) -> float:
+        """The isolation's contact_spread (m): 0 unless a CPF point (see the class doc)."""
+        if state.line_of_action is None:
+            return 0.0
+        torque, force, index = state.line_of_action
+        rival, _ = line_of_action_ambiguity(self.filter, torque, force, index, state.cost,
+                                            tolerance=self._spacing)  # fmt: skip
+        return rival
+
     def _update(self, context, state):
         old = self._get(context)
         step = old.step + 1
         new = _IsolatorState(step=step)
+        flag = self._read(context, self._flag)[0] > 0.5
+        if not flag:
+            # Out of contact nothing else is read (the pose's kinematics and the wrench wait
+            # for a contact); the step still counts, it keys the CPF's draws.
+            state.get_mutable_abstract_state(self._state).set_value(new)
+            return
         wrench = self._read(context, self._wrench)
         X_WG = pose_from_vector(self._read(context, self._pose))
-        flag = self._read(context, self._flag)[0] > 0.5
-        if flag and self._n_bubbles:
+        if self._n_bubbles:
             flags = self._read(context, self._bubble_flags) > 0.5
             points = self._read(context, self._bubble_points).reshape(-1, 3)
             if flags.any():
@@ -326,14 +342,10 @@ class ContactIsolator(LeafSystem):
                 result, particles = self.filter.step(torque, force, rng, previous)
                 if np.isfinite(result.cost):
                     point_W = X_WG.multiply(result.point)
-                    rival, _ = line_of_action_ambiguity(
-                        self.filter, torque, result.force, result.index, result.cost,
-                        tolerance=self._spacing,
-                    )  # fmt: skip
                     new = dataclasses.replace(
                         new, particles=particles, point_W=point_W, point_G=result.point,
                         points_W=(point_W,), cost=result.cost, source=SOURCE_CPF,
-                        spread=rival, ambiguous=rival > self._ambiguity_distance,
+                        line_of_action=(torque, result.force, result.index),
                         wrench_sum=total,
                         wrench_count=count,
                     )  # fmt: skip

@@ -115,8 +115,14 @@ class GraspExecutor(LeafSystem):
         self._state = self.DeclareDiscreteState(np.zeros(_N_STATE))
         self._v_state = self.DeclareDiscreteState(np.zeros(7 + len(fingers) + 1))
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
-        self.DeclareVectorOutputPort("desired_state", self._nq + self._nv, self._calc_desired)
-        self.DeclareVectorOutputPort("grasp_phase", 1, self._calc_phase)
+        # Outputs of the discrete state (and the passed-through command) only: saying so
+        # spares recomputing them at each integrator stage of every plant step.
+        state = {self.discrete_state_ticket(self._state), self.discrete_state_ticket(self._v_state)}
+        command = self.input_port_ticket(self.get_input_port(0).get_index())
+        self.DeclareVectorOutputPort("desired_state", self._nq + self._nv, self._calc_desired,
+                                     prerequisites_of_calc=state | {command})
+        self.DeclareVectorOutputPort("grasp_phase", 1, self._calc_phase,
+                                     prerequisites_of_calc=state | {self.time_ticket()})
 
     @property
     def total_duration(self) -> float:
