@@ -159,6 +159,37 @@ def test_cloned_context_reruns_to_identical_map_points(short_fb):
     np.testing.assert_array_equal(points, result.map_points)
 
 
+def test_truth_labeller_matches_the_simulations_own_contact_results(short_fb):
+    """The labeller reads contacts in a scratch context set to a plant state; they must be the
+    contacts of the live simulation at that state (Drake's contact results there)."""
+    bor, simulator, _, _ = short_fb
+    context = simulator.get_context()
+    plant = bor.scene.plant
+    plant_context = plant.GetMyContextFromRoot(context)
+    live = plant.get_contact_results_output_port().Eval(plant_context)
+    robot = {plant.GetModelInstanceByName(n) for n in ("iiwa", "bubble_gripper")}
+    inspector = bor.scene.scene_graph.model_inspector()
+
+    def is_robot(geometry) -> bool:
+        return plant.GetBodyFromFrameId(inspector.GetFrameId(geometry)).model_instance() in robot
+
+    expected = []
+    for i in range(live.num_hydroelastic_contacts()):
+        surface = live.hydroelastic_contact_info(i).contact_surface()
+        if is_robot(surface.id_M()) != is_robot(surface.id_N()):
+            expected.append(np.array(surface.centroid()))
+    for i in range(live.num_point_pair_contacts()):
+        pair = live.point_pair_contact_info(i)
+        if is_robot(pair.point_pair().id_A) != is_robot(pair.point_pair().id_B):
+            expected.append(np.array(pair.contact_point()))
+    found = bor.truth.contacts(plant.GetPositionsAndVelocities(plant_context))
+    assert expected, "the short run should end with the gripper touching an object"
+    assert len(found) == len(expected)
+    for contact, point in zip(found, expected, strict=True):
+        np.testing.assert_array_equal(contact.point, point)  # bit for bit
+    assert {c.name for c in found} <= set(bor.scene.free_bodies) | set(bor.scene.welded_bodies)
+
+
 def test_free_motion_raises_no_wrench(short_fb):
     """The first action moves in free space: the observer sees no wrench, no step is flagged."""
     _, _, snapshot, result = short_fb
