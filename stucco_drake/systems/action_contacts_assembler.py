@@ -68,7 +68,7 @@ class _AssemblerState:
 
     action_index: int = -1  # the action under way, as the detector reports it
     latched: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
-    latched_truth: np.ndarray | None = None  # truth_state copied when the points were latched
+    latched_truth_state: np.ndarray | None = None  # truth_state when the points were latched
     completed: ActionContacts = dataclasses.field(default_factory=ActionContacts)
     completed_truth: tuple = ()
     ee_pose: RigidTransform = dataclasses.field(default_factory=RigidTransform)
@@ -161,14 +161,15 @@ class ActionContactsAssembler(LeafSystem):
             if old.action_index >= 0:
                 new = self._complete(context, old)
             new = dataclasses.replace(
-                new, action_index=current.action_index, latched=np.zeros((0, 3)), latched_truth=None
+                new, action_index=current.action_index, latched=np.zeros((0, 3)),
+                latched_truth_state=None,
             )
         if self._has_contact.Eval(context)[0] > 0.5:
             points = np.array(self._points.Eval(context), dtype=float).reshape(-1, 3)
             if len(points):
                 # A snapshot, not the labels: labelling waits for the action's end.
                 truth = self._truth.Eval(context).copy() if self._with_truth else None
-                new = dataclasses.replace(new, latched=points, latched_truth=truth)
+                new = dataclasses.replace(new, latched=points, latched_truth_state=truth)
         if new is not old:
             state.get_mutable_abstract_state(self._state).set_value(new)
 
@@ -187,7 +188,7 @@ class ActionContactsAssembler(LeafSystem):
             points = old.latched
             missed += not len(points)
             if len(points) and self._with_truth:
-                truth = tuple(self._truth_labeller.label(points, old.latched_truth))
+                truth = tuple(self._truth_labeller.label(points, old.latched_truth_state))
         dx = np.tile(np.asarray(done.dx, dtype=float).reshape(1, 3), (len(points), 1))
         return dataclasses.replace(
             old,
