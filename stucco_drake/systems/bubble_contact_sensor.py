@@ -120,10 +120,11 @@ class BubbleContactSensor(LeafSystem):
     def measure(self, results: ContactResults, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(penetration (n,), point (n, 3), pressure x area (n,)) of each bubble, no noise.
 
-        ``poses`` is the body poses' list, or a callable returning it (asked for only when a
-        bubble has a hydroelastic contact: most steps have none)."""
+        ``poses`` returns the plant's body poses (list by BodyIndex); it is called only when a
+        bubble has a hydroelastic contact (most steps have none)."""
         n = self._n
         depth, moment, weight = np.zeros(n), np.zeros((n, 3)), np.zeros(n)
+        body_poses = None
         for i in range(results.num_hydroelastic_contacts()):
             surface = results.hydroelastic_contact_info(i).contact_surface()
             for gid in (surface.id_M(), surface.id_N()):
@@ -131,10 +132,10 @@ class BubbleContactSensor(LeafSystem):
                 if b is None:
                     continue
                 _, body, X_BG, radii, _ = self._bubbles[b]
-                if callable(poses):
-                    poses = poses()
+                if body_poses is None:
+                    body_poses = poses()
                 centroid, total, vertices = _surface_moments(surface)
-                X_GW = poses[body].multiply(X_BG).inverse()
+                X_GW = body_poses[body].multiply(X_BG).inverse()
                 local = vertices @ X_GW.rotation().matrix().T + X_GW.translation()
                 depth[b] = max(depth[b], -ellipsoid_signed_distance(local, radii).min())
                 # A surface with no pressure still counts, with a token weight.

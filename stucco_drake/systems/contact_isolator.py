@@ -23,7 +23,7 @@ import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from stucco_drake.core.contact_isolation import ContactParticleFilter
 from stucco_drake.systems.gripper_samples import (
@@ -271,12 +271,24 @@ class ContactIsolator(LeafSystem):
             ("contact_point_gripper", 3, lambda s: s.point_G),
             ("isolation_cost", 1, lambda s: [s.cost]),
             ("contact_source", 1, lambda s: [s.source]),
-            ("contact_spread", 1, lambda s: [self._spread(s)]),
-            ("contact_ambiguous", 1,
-             lambda s: [float(self._spread(s) > self._ambiguity_distance)]),
         ):
             self.DeclareVectorOutputPort(name, size, self._make_output(get),
                                          prerequisites_of_calc=ticket)  # fmt: skip
+        # The spread is costly and only diagnostic: computed once per state, when asked for.
+        self._spread_cache = self.DeclareCacheEntry(
+            "contact spread", ValueProducer(
+                allocate=lambda: AbstractValue.Make(0.0),
+                calc=lambda c, v: v.set_value(self._spread(self._get(c)))),
+            prerequisites_of_calc=ticket)  # fmt: skip
+        self.DeclareVectorOutputPort(
+            "contact_spread", 1,
+            lambda c, o: o.SetFromVector([self._spread_cache.Eval(c)]),
+            prerequisites_of_calc={self._spread_cache.ticket()})  # fmt: skip
+        self.DeclareVectorOutputPort(
+            "contact_ambiguous", 1,
+            lambda c, o: o.SetFromVector(
+                [float(self._spread_cache.Eval(c) > self._ambiguity_distance)]),
+            prerequisites_of_calc={self._spread_cache.ticket()})  # fmt: skip
         self.DeclareAbstractOutputPort(
             "contact_points",
             lambda: AbstractValue.Make([np.zeros(3)]),
