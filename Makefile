@@ -1,5 +1,6 @@
 # Two commands on a fresh machine: `make test` and `make demo`. Each creates .venv when it is
-# missing and (re)installs the project only when pyproject.toml changed since the last install.
+# missing and (re)installs the project only when pyproject.toml or constraints.txt changed since
+# the last install; constraints.txt holds the exact package versions the results were made with.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -11,8 +12,8 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-$(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e '.[test,dask]'
+$(STAMP): pyproject.toml constraints.txt | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[test,dask]'
 	touch $(STAMP)
 
 # Debian packages: headless Chromium renders a Meshcat recording in a test; Graphviz's dot

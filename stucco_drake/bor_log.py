@@ -23,6 +23,7 @@ import math
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
+from stucco_drake import kernels
 from stucco_drake.bor import build_bor_diagram, collision_shapes, object_surfaces, target_shape
 from stucco_drake.bor_episode import make_bor_simulator, run_episode
 from stucco_drake.core.penetration import RobotPenetration
@@ -215,6 +216,7 @@ def record_episode(
                          on_action=recorder.on_action)
     return recorder.log(base.name, seed, action_noise, {
         "wall_time_s": float(result.wall_time_s),
+        "kernels": kernels.status(),  # "pinned": the same log on any machine (kernels.py)
         "live": {"method": method, "ce_cm": float(result.ce_cm), "fmi": float(result.fmi)},
     })
 
