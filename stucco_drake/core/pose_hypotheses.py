@@ -1,0 +1,239 @@
+"""Weighted hypotheses of the target's planar pose from all the evidence a blind robot has.
+
+A pose (x, y, yaw) of the target's frame O in the world W is scored by the negative
+log-likelihood of three kinds of evidence, in the spirit of CHSEL (Zhong, Fazeli, Berenson,
+RSS 2023: contact points lie on the object's surface, free-space points outside it):
+
+- **Contact points.** Each tracked point either lies on the target's surface (cost
+  ``d^2 / 2 sigma_i^2``, ``d`` its signed distance to the posed target) or on some other object,
+  at a fixed cost ``other_object_cost`` plus the same quadratic for any depth inside the target
+  (another object's surface cannot lie inside it). A point takes the cheaper; the target
+  *explains* it when that is the surface. ``sigma_i`` adds the point's spread over the
+  tracker's particles to the sensor's noise, so points the filter is unsure of count less.
+- **Free space.** Where the gripper was after the target was last touched, the target is not:
+  the posed target's cross-section must not penetrate the robot (its own geometry, pxpen) at
+  those configs. Earlier configs do not count, since the target may have been pushed there since.
+  Penetration beyond a tolerance costs ``depth / free_space_scale`` per (config, point) pair.
+- **Shape.** Only poses of the known outline are proposed: ICP of the outline on every segment
+  of tracked points, on every part of a segment wider than the target, and on every union of
+  two segments the target could span; each is then refitted on the points it explains.
+
+The hypotheses' weights are ``exp(-cost / temperature)``, normalised. The chosen pose is the
+cheapest; the confidence is the weight of the hypotheses whose posed outline lies within
+``agreement`` (Hausdorff distance, m) of the chosen one's, i.e. the posterior probability that
+a grasp at the chosen pose closes on the target, and 0 when the chosen pose explains fewer than
+``min_explained`` points (the target was barely touched). Units: m, rad; world frame W.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+
+from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
+from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.pose_penetration import restart_penetration, sample_cross_section
+from stucco_drake.core.segment_extent import outline_extent, split_wider_segments, xy_extent
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.core.validation import as_finite_array
+
+
+@dataclasses.dataclass(frozen=True)
+class HypothesisParams:
+    """Settings of :func:`pose_hypotheses` (m unless noted).
+
+    Attributes:
+        contact_noise: standard deviation of a contact point about the touched surface.
+        other_object_cost: cost (negative log-likelihood, dimensionless) of a point lying on
+            another object; a point within ``contact_noise * sqrt(2 other_object_cost)`` of the
+            posed target's surface is cheaper on it (2.0: two standard deviations).
+        free_space_tolerance: penetration into the robot ignored per (config, point) pair.
+        free_space_scale: penetration beyond the tolerance costing one unit.
+        temperature: divides the costs before the weights are formed (dimensionless).
+        agreement: Hausdorff distance between posed outlines within which two hypotheses
+            count as the same grasp.
+        min_explained: fewest contact points the chosen pose must explain for any confidence.
+        n_restarts: ICP starts per proposal group.
+        outline_spacing: spacing of the outline points ICP fits and agreement compares.
+        fill_spacing: spacing of the cross-section points checked against free space.
+    """
+
+    contact_noise: float = 0.004
+    other_object_cost: float = 2.0
+    free_space_tolerance: float = 0.002
+    free_space_scale: float = 0.002
+    temperature: float = 1.0
+    agreement: float = 0.015
+    min_explained: int = 3
+    n_restarts: int = 20
+    outline_spacing: float = 0.002
+    fill_spacing: float = 0.005
+
+
+@dataclasses.dataclass(frozen=True)
+class FreeSpace:
+    """Where the robot has been: its pxpen and the end-effector configs, oldest first.
+
+    Attributes:
+        penetration: the robot's pxpen.
+        positions: (k, 3) end-effector origins in W (m), one per action, oldest first.
+        rotation: (3, 3) R_WE shared by all configs (None: identity).
+        point_steps: (n,) index into ``positions`` of the config at which each contact point
+            was sensed (the point's action).
+    """
+
+    penetration: RobotPenetration
+    positions: np.ndarray
+    rotation: np.ndarray | None
+    point_steps: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class PoseHypotheses:
+    """Distinct target poses with their weights, cheapest first.
+
+    Attributes:
+        poses: (k, 3) (x, y, yaw) in W (m, m, rad).
+        costs: (k,) negative log-likelihoods (dimensionless, relative: only differences count).
+        weights: (k,) posterior weights, summing to 1.
+        explained: (k, n) whether each hypothesis puts each contact point on the target.
+        confidence: posterior weight of the hypotheses agreeing with the first (0 to 1).
+    """
+
+    poses: np.ndarray
+    costs: np.ndarray
+    weights: np.ndarray
+    explained: np.ndarray
+    confidence: float
+
+    @property
+    def pose(self) -> np.ndarray:
+        """(3,) the chosen (cheapest) pose (x, y, yaw)."""
+        return self.poses[0]
+
+
+def point_spread(particle_points, log_weights) -> np.ndarray:
+    """(n,) each contact point's weighted RMS distance (m) from its mean over the particles
+    (``particle_points`` (P, n, 3) m, ``log_weights`` (P,))."""
+    weights = np.exp(np.asarray(log_weights, dtype=np.float64) - np.max(log_weights))
+    weights /= weights.sum()
+    points = np.asarray(particle_points, dtype=np.float64)
+    mean = np.einsum("p,pni->ni", weights, points)
+    return np.sqrt(np.einsum("p,pn->n", weights, np.sum((points - mean) ** 2, axis=-1)))
+
+
+def contact_costs(poses, points, sigma, shape, params: HypothesisParams):
+    """(B,) contact cost of each pose and (B, n) which points it explains (see the module)."""
+    local = np.einsum("bni,bij->bnj", points[None, :, :2] - poses[:, None, :2],
+                      rotations(poses[:, 2]))  # fmt: skip
+    d = cross_section_sdf(shape)(local)
+    on_surface = d**2 / (2.0 * sigma**2)
+    elsewhere = params.other_object_cost + np.minimum(d, 0.0) ** 2 / (2.0 * sigma**2)
+    explained = on_surface < elsewhere
+    return np.minimum(on_surface, elsewhere).sum(axis=1), explained
+
+
+def free_space_costs(poses, explained, heights, free: FreeSpace | None, fill,
+                     params: HypothesisParams) -> np.ndarray:  # fmt: skip
+    """(B,) free-space cost of each pose: its penetration into the robot at the configs since
+    the last action that sensed a point it explains (all configs when it explains none)."""
+    costs = np.zeros(len(poses))
+    if free is None or len(free.positions) == 0:
+        return costs
+    for b, pose in enumerate(poses):
+        steps = free.point_steps[explained[b]]
+        first = int(steps.max()) if len(steps) else 0
+        depth = restart_penetration(free.penetration, pose[None], fill, heights[b],
+                                    free.positions[first:], free.rotation,
+                                    params.free_space_tolerance)  # fmt: skip
+        costs[b] = depth[0] / params.free_space_scale
+    return costs
+
+
+def _proposal_groups(points, labels, reach: float, min_points: int) -> list[np.ndarray]:
+    """Index arrays of the points ICP fits: each segment (split where wider than ``reach``)
+    and each union of two whose points span at most ``reach``."""
+    labels = split_wider_segments(points, labels, reach)
+    singles = [np.flatnonzero(labels == label) for label in np.unique(labels[labels >= 0])]
+    groups = [g for g in singles if len(g) >= min_points]
+    for first, second in itertools.combinations(singles, 2):
+        union = np.concatenate([first, second])
+        if len(union) >= min_points and xy_extent(points[union]) <= reach:
+            groups.append(union)
+    return groups
+
+
+def _hausdorff(a, b) -> float:
+    """Symmetric Hausdorff distance (m) between point sets a (m, 2) and b (m', 2)."""
+    d = np.sqrt(np.sum((a[:, None] - b[None]) ** 2, axis=-1))
+    return float(max(d.min(axis=0).max(), d.min(axis=1).max()))
+
+
+def _distinct(poses, outline, resolution: float) -> np.ndarray:
+    """``poses`` without near-duplicates: a pose whose posed outline lies within
+    ``resolution`` (m, Hausdorff) of an earlier kept one's is dropped (a box turned by pi, a
+    cylinder at any yaw)."""
+    posed = transform(poses, outline)
+    kept: list[int] = []
+    for b in range(len(poses)):
+        near = (k for k in kept if np.hypot(*(posed[k].mean(0) - posed[b].mean(0))) <= resolution)
+        if not any(_hausdorff(posed[k], posed[b]) <= resolution for k in near):
+            kept.append(b)
+    return poses[kept]
+
+
+def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
+                    *, spread=None, free_space: FreeSpace | None = None,
+                    params: HypothesisParams = HypothesisParams()) -> PoseHypotheses:  # fmt: skip
+    """Weighted target-pose hypotheses from tracked contact points (see the module).
+
+    Args:
+        rng: caller-seeded generator for the ICP starts.
+        points: (n, 3) tracked contact points in W (m), e.g. the MAP particle's.
+        labels: (n,) their segment labels (negative: noise, proposing nothing).
+        shape: the target's known geometry in its frame O.
+        spread: (n,) each point's spread over the tracker's particles (m; see
+            :func:`point_spread`); None for none.
+        free_space: where the robot has been (None: contact evidence only).
+        params: the settings.
+
+    Raises:
+        ValueError: naming the argument, e.g. no group with enough points to fit.
+    """
+    points = as_finite_array(points, "points", (None, 3))
+    labels = np.asarray(labels)
+    if labels.shape != (len(points),) or not np.issubdtype(labels.dtype, np.integer):
+        raise ValueError(f"labels: expected {len(points)} integer labels, got {labels.shape}")
+    spread = np.zeros(len(points)) if spread is None else as_finite_array(
+        spread, "spread", (len(points),))  # fmt: skip
+    sigma = np.sqrt(params.contact_noise**2 + spread**2)
+    reach = outline_extent(shape) + 3.0 * params.contact_noise
+    groups = _proposal_groups(points, labels, reach, params.min_explained)
+    if not groups:
+        raise ValueError(f"labels: no segment has at least {params.min_explained} points")
+    outline = sample_outline(shape, params.outline_spacing)
+    fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
+    poses = _distinct(np.concatenate(fits), outline, params.outline_spacing)
+    # Refit each on the points it explains (one EM step): clutter in its segment let go,
+    # points of the target in other segments taken in.
+    _, explained = contact_costs(poses, points, sigma, shape, params)
+    refit = [icp_2d(rng, points[e, :2], outline, 1, initial_pose=pose).poses[0]
+             if e.sum() >= params.min_explained else pose
+             for pose, e in zip(poses, explained, strict=True)]  # fmt: skip
+    poses = _distinct(np.concatenate([poses, refit]), outline, params.outline_spacing)
+    contact, explained = contact_costs(poses, points, sigma, shape, params)
+    heights = np.array([points[e, 2].mean() if e.any() else points[:, 2].mean()
+                        for e in explained])  # fmt: skip
+    fill = sample_cross_section(shape, params.fill_spacing)
+    costs = contact + free_space_costs(poses, explained, heights, free_space, fill, params)
+    order = np.argsort(costs, kind="stable")
+    poses, costs, explained = poses[order], costs[order], explained[order]
+    weights = np.exp(-(costs - costs[0]) / params.temperature)
+    weights /= weights.sum()
+    posed = transform(poses, outline)
+    agree = np.array([_hausdorff(posed[0], p) <= params.agreement for p in posed])
+    confidence = float(weights[agree].sum()) if explained[0].sum() >= params.min_explained else 0.0
+    poses[:, 2] = (poses[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
+    return PoseHypotheses(poses, costs, weights, explained, confidence)
