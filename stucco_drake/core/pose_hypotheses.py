@@ -18,11 +18,12 @@ RSS 2023: contact points lie on the object's surface, free-space points outside 
   of tracked points, on every part of a segment wider than the target, and on every union of
   two segments the target could span; each is then refitted on the points it explains.
 
-The hypotheses' weights are ``exp(-cost / temperature)``, normalised. The chosen pose is the
-cheapest; the confidence is the weight of the hypotheses whose posed outline lies within
-``agreement`` (Hausdorff distance, m) of the chosen one's, i.e. the posterior probability that
-a grasp at the chosen pose closes on the target, and 0 when the chosen pose explains fewer than
-``min_explained`` points (the target was barely touched). Units: m, rad; world frame W.
+The hypotheses' weights are ``exp(-cost / temperature)``, normalised. Two hypotheses agree when
+their posed outlines lie within ``agreement`` (Hausdorff distance, m): a grasp at one closes on
+the target at the other. The chosen pose is the one the most weight agrees with, and that
+weight is the confidence: the posterior probability that a grasp there closes on the target
+(0 when the chosen pose explains fewer than ``min_explained`` points: the target was barely
+touched). Units: m, rad; world frame W.
 """
 
 from __future__ import annotations
@@ -56,8 +57,9 @@ class HypothesisParams:
             count as the same grasp.
         min_explained: fewest contact points the chosen pose must explain for any confidence.
         n_restarts: ICP starts per proposal group.
-        outline_spacing: spacing of the outline points ICP fits and agreement compares.
-        fill_spacing: spacing of the cross-section points checked against free space.
+        outline_spacing: spacing of the outline points ICP fits.
+        fill_spacing: spacing of the cross-section points checked against free space, and
+            of the outline on which hypotheses are compared (closer ones count as one).
     """
 
     contact_noise: float = 0.004
@@ -99,7 +101,9 @@ class PoseHypotheses:
         costs: (k,) negative log-likelihoods (dimensionless, relative: only differences count).
         weights: (k,) posterior weights, summing to 1.
         explained: (k, n) whether each hypothesis puts each contact point on the target.
-        confidence: posterior weight of the hypotheses agreeing with the first (0 to 1).
+        confidence: posterior weight of the hypotheses agreeing with the chosen one (0 to 1;
+            0 when it explains fewer than ``min_explained`` points).
+        chosen: index of the pose to grasp at: the one most weight agrees with.
     """
 
     poses: np.ndarray
@@ -107,11 +111,12 @@ class PoseHypotheses:
     weights: np.ndarray
     explained: np.ndarray
     confidence: float
+    chosen: int = 0
 
     @property
     def pose(self) -> np.ndarray:
-        """(3,) the chosen (cheapest) pose (x, y, yaw)."""
-        return self.poses[0]
+        """(3,) the chosen pose (x, y, yaw)."""
+        return self.poses[self.chosen]
 
 
 def point_spread(particle_points, log_weights) -> np.ndarray:
@@ -215,14 +220,16 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
         raise ValueError(f"labels: no segment has at least {params.min_explained} points")
     outline = sample_outline(shape, params.outline_spacing)
     fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
-    poses = _distinct(np.concatenate(fits), outline, params.outline_spacing)
+    # Hypotheses are compared on a coarser outline, and count as one within its spacing.
+    coarse = sample_outline(shape, params.fill_spacing)
+    poses = _distinct(np.concatenate(fits), coarse, params.fill_spacing)
     # Refit each on the points it explains (one EM step): clutter in its segment let go,
     # points of the target in other segments taken in.
     _, explained = contact_costs(poses, points, sigma, shape, params)
     refit = [icp_2d(rng, points[e, :2], outline, 1, initial_pose=pose).poses[0]
              if e.sum() >= params.min_explained else pose
              for pose, e in zip(poses, explained, strict=True)]  # fmt: skip
-    poses = _distinct(np.concatenate([poses, refit]), outline, params.outline_spacing)
+    poses = _distinct(np.concatenate([poses, refit]), coarse, params.fill_spacing)
     contact, explained = contact_costs(poses, points, sigma, shape, params)
     heights = np.array([points[e, 2].mean() if e.any() else points[:, 2].mean()
                         for e in explained])  # fmt: skip
@@ -232,8 +239,20 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     poses, costs, explained = poses[order], costs[order], explained[order]
     weights = np.exp(-(costs - costs[0]) / params.temperature)
     weights /= weights.sum()
-    posed = transform(poses, outline)
-    agree = np.array([_hausdorff(posed[0], p) <= params.agreement for p in posed])
-    confidence = float(weights[agree].sum()) if explained[0].sum() >= params.min_explained else 0.0
+    # The grasp is made at one pose; it closes on the target under every hypothesis whose
+    # outline lies within the agreement of that pose's. Take the pose with the most weight so
+    # covered (the cheapest among equals), not merely the cheapest.
+    posed = transform(poses, coarse)
+    agree = np.eye(len(poses), dtype=bool)
+    centres = posed.mean(axis=1)
+    for a, b in itertools.combinations(range(len(poses)), 2):
+        # Outlines whose centroids lie farther apart than twice the agreement cannot agree.
+        if np.hypot(*(centres[a] - centres[b])) <= 2.0 * params.agreement:
+            agree[a, b] = agree[b, a] = _hausdorff(posed[a], posed[b]) <= params.agreement
+    covered = agree.astype(np.float64) @ weights
+    chosen = int(np.argmax(np.round(covered, 12)))
+    confidence = float(covered[chosen])
+    if explained[chosen].sum() < params.min_explained:
+        confidence = 0.0
     poses[:, 2] = (poses[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
-    return PoseHypotheses(poses, costs, weights, explained, confidence)
+    return PoseHypotheses(poses, costs, weights, explained, confidence, chosen)
