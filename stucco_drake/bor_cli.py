@@ -27,7 +27,8 @@ def add_run_command(subparsers) -> None:
     run = subparsers.add_parser("run", help="rummage a scene blind, track contacts, estimate "
                                             "the target's pose; print GS, CE, FMI")  # fmt: skip
     run.add_argument("--scene", required=True,
-                     help="scene name (diagrams/<name>.yaml, e.g. FB) or a scene file path")
+                     help="scene name (diagrams/<name>.yaml, e.g. FB), a scene file path, or a "
+                          "folder of scene files (runs each)")
     run.add_argument("--method", default="stucco", choices=TRACKER_NAMES)
     run.add_argument("--seed", type=int, default=0, help="seed of every random stream")
     run.add_argument("--actions", type=int, default=None,
@@ -65,12 +66,15 @@ def _grasp_hook(enabled: bool):
 def run_bor(args: argparse.Namespace) -> int:
     from stucco_drake.bor_episode import run_episode
     from stucco_drake.core.params import SoftTrackingParams
-    from stucco_drake.scenes import load_scene
+    from stucco_drake.scenes import load_scene, scene_paths
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 
-    scene = load_scene(args.scene)  # a bad scene file is reported by the CLI's main
+    # A folder runs each of its scenes; a bad scene file is reported by the CLI's main.
+    scenes = [load_scene(path) for path in scene_paths(args.scene)]
     params = None
     try:
+        if len(scenes) > 1 and (args.record or args.plot):
+            raise ValueError(f"--record and --plot take one scene, not a folder of {len(scenes)}")
         if args.stucco_params is not None:
             if args.method != "stucco":
                 raise ValueError(f"--stucco-params is for --method stucco, not {args.method}")
@@ -79,10 +83,11 @@ def run_bor(args: argparse.Namespace) -> int:
         print(f"stucco-drake run: error: {error}", file=sys.stderr)
         return 2
     meshcat = start_meshcat(args.meshcat, args.record)
-    result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
-                         grasp=_grasp_hook(not args.no_grasp), dx_model=args.dx_model,
-                         tracker_params=params)
-    print(result.summary())
+    for scene in scenes:
+        result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
+                             grasp=_grasp_hook(not args.no_grasp), dx_model=args.dx_model,
+                             tracker_params=params)
+        print(result.summary(), flush=True)
     if args.record:
         save_recording(meshcat, args.record)
     if args.plot:

@@ -19,6 +19,8 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 
 import numpy as np
 from pydrake.systems.analysis import Simulator
@@ -30,10 +32,11 @@ from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.target_pose import estimate_target_pose
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
+from stucco_drake.eval.sets import PAPER_SCENES, scene_set
 from stucco_drake.eval.sources import EpisodeSource
 from stucco_drake.grasp import build_grasp_scene, grasp_estimate
 from stucco_drake.gripper_sdf import gripper_penetration
-from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
+from stucco_drake.scenes import BuiltScene, SceneFile, load_scene, resolve_scene_path, scene_paths
 from stucco_drake.scenes.builder import yaw_of
 from stucco_drake.systems.gripper_samples import sample_gripper_surface
 
@@ -232,11 +235,11 @@ def log_penetration(log: EpisodeLog) -> RobotPenetration:
     return _gripper_penetration(float(log.info["finger_position"]))
 
 
-def _grasp_scene(scene_name: str):
-    return build_grasp_scene(load_scene(scene_name))
+def _grasp_scene(scene: str):
+    return build_grasp_scene(load_scene(scene))
 
 
-def grasp_from_log(log: EpisodeLog, tracker):
+def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None):
     """Grasp the target where the tracker's points say it is, from the logged final state.
 
     The target's pose is estimated as the BOR Diagram does
@@ -244,11 +247,12 @@ def grasp_from_log(log: EpisodeLog, tracker):
     gripper's pxpen at the logged end-effector positions since the chosen segment was last
     touched, ``penetration_configs="since_touch"``), with a generator seeded by
     ``[log.seed, 1]``; the grasp then runs in a freshly built grasp scene set to the logged
-    plant state (:func:`~stucco_drake.grasp.grasp_estimate`). Returns the
+    plant state (:func:`~stucco_drake.grasp.grasp_estimate`), that of ``scene`` (a scene
+    name or file; default: the shipped scene named ``log.scene``). Returns the
     :class:`~stucco_drake.grasp.GraspResult`, or None when no segment can be fitted (no grasp
     is attempted: a failure).
     """
-    built = _grasp_scene(log.scene)
+    built = _grasp_scene(log.scene if scene is None else str(scene))
     shape = target_shape(built)
     points, labels = tracker.map_points(), np.asarray(tracker.segment())
     if np.bincount(labels[labels >= 0], minlength=1).max() < MIN_SEGMENT_POINTS:
@@ -269,15 +273,65 @@ def grasp_from_log(log: EpisodeLog, tracker):
     return grasp_estimate(built, simulator, estimate, points, shape)
 
 
-def grasp_success(log: EpisodeLog, tracker) -> bool:
-    """The ``grasp`` hook of :func:`stucco_drake.eval.replay.replay` for Drake logs."""
-    result = grasp_from_log(log, tracker)
+def grasp_success(log: EpisodeLog, tracker, scene: str | None = None) -> bool:
+    """The ``grasp`` hook of :func:`stucco_drake.eval.replay.replay` for Drake logs (``scene``
+    as :func:`grasp_from_log`'s)."""
+    result = grasp_from_log(log, tracker, scene)
     return bool(result is not None and result.success)
 
 
 
 #: The paper's four Blind Object Retrieval scenes, as sources of ``stucco-drake table``.
-BOR_SCENES = ("FB", "BC", "IB", "TC")
+BOR_SCENES = PAPER_SCENES
 BOR_SOURCES = {
-    name: EpisodeSource(record_episode, log_penetration, grasp_success) for name in BOR_SCENES
+    name: EpisodeSource(record_episode, log_penetration, grasp_success, scene_set="paper")
+    for name in BOR_SCENES
 }
+
+
+# ------------------------------------------------------------------ scene files in the table
+def record_scene_file(path: str, name: str, seed: int) -> EpisodeLog:
+    """:func:`record_episode` of the scene file at ``path``, which must be the scene ``name``
+    (the table's key for it)."""
+    scene = load_scene(path)
+    if scene.name != name:
+        raise ValueError(f"{path} holds scene {scene.name!r}, not {name!r}")
+    return record_episode(scene, seed)
+
+
+def scene_file_source(path: str | Path, scene: SceneFile) -> EpisodeSource:
+    """The table's source of ``scene``, read from the file at ``path``: its episodes and
+    grasps are that file's (picklable, for worker processes)."""
+    path = str(Path(path).resolve())
+    return EpisodeSource(
+        functools.partial(record_scene_file, path), log_penetration,
+        functools.partial(grasp_success, scene=path),
+        scene_set=scene_set(scene.name, scene.base, scene.layout_seed),
+    )  # fmt: skip
+
+
+def table_scenes(args: Sequence[str], sources: Mapping[str, EpisodeSource]):
+    """(scene names, sources) of the table's ``--scenes`` arguments: each is a name of
+    ``sources``, a scene file or a folder of them (every ``*.yaml`` in it, by name); a file's
+    scene is named by its ``name`` field. Other arguments are kept as names, for the table to
+    report as unknown. ValueError when two files give one name, or a file a name of
+    ``sources`` that is not that file."""
+    names, known = [], dict(sources)
+    files: dict[str, Path] = {}
+    for arg in args:
+        if arg in sources or not Path(arg).exists():
+            names.append(arg)
+            continue
+        for path in scene_paths(arg):
+            scene, path = load_scene(path), path.resolve()
+            taken = files.get(scene.name)
+            if taken is None and scene.name in known:
+                taken = resolve_scene_path(scene.name).resolve()
+            if taken is not None and taken != path:
+                raise ValueError(f"{path}: its scene {scene.name!r} is also {taken}; "
+                                 "rename one (the table keys its logs by scene name)")
+            if scene.name not in known:
+                files[scene.name] = path
+                known[scene.name] = scene_file_source(path, scene)
+            names.append(scene.name)
+    return list(dict.fromkeys(names)), known

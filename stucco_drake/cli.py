@@ -9,11 +9,12 @@ import time
 import numpy as np
 
 from stucco_drake.bor_cli import add_diagram_command, add_run_command
-from stucco_drake.bor_log import BOR_SOURCES
+from stucco_drake.bor_log import BOR_SOURCES, table_scenes
 from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES
 from stucco_drake.scenes import SceneFileError
 from stucco_drake.scenes.cli_sim import add_sim_command
+from stucco_drake.scenes_cli import add_scenes_command
 from stucco_drake.sweep_cli import add_sweep_command
 
 
@@ -63,7 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=0, help="seed of the tracker's generator")
     demo.set_defaults(run=_demo)
     add_sim_command(commands)
-    add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES})
+    add_scenes_command(commands)
+    add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES}, table_scenes)
     add_run_command(commands)
     add_diagram_command(commands)
     add_sweep_command(commands)

@@ -46,13 +46,12 @@ from stucco_drake.bor import build_bor_diagram, object_surfaces
 from stucco_drake.bor_episode import action_stop_time, make_bor_simulator
 from stucco_drake.bor_log import EpisodeRecorder, log_penetration
 from stucco_drake.eval.episode_log import EpisodeLog
+from stucco_drake.eval.sets import TRAINING_SCENES
 from stucco_drake.eval.sources import EpisodeSource
 from stucco_drake.scenes import SceneFile, build_scene, load_scene
 from stucco_drake.systems.gripper_samples import sample_gripper_surface
 from stucco_drake.systems.planar_controller import StartUnreachable, gripper_rotation
 
-#: The paper's training scenes.
-TRAINING_SCENES = ("SELECT1", "SELECT2", "SELECT3", "SELECT4")
 #: Random actions taken after each detected contact (paper: "random walk of length 6").
 WALK_LENGTH = 6
 #: A trial ends when the gripper is this close to its goal (m; the authors' dist_for_done).
@@ -325,7 +324,8 @@ def is_discarded(log: EpisodeLog) -> bool:
 
 #: The training scenes as sources of ``stucco-drake sweep`` (no grasp: tracking only).
 TRAINING_SOURCES = {
-    name: EpisodeSource(record_trial, log_penetration) for name in TRAINING_SCENES
+    name: EpisodeSource(record_trial, log_penetration, scene_set="training")
+    for name in TRAINING_SCENES
 }
 
 __all__ = [

@@ -25,6 +25,7 @@ from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.replay import replay
 from stucco_drake.eval.results import RunResults, row_key
 from stucco_drake.eval.runner import Progress, RunInterrupted, make_executor, run_table
+from stucco_drake.eval.sets import describe_sets
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
 from stucco_drake.eval.table import plot_fmi_ce, write_table
 
@@ -223,14 +224,17 @@ def make_table(
     return tabulate()
 
 
-def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES) -> None:
-    """Adds ``table`` to the CLI's subparsers, over the scenes of ``sources``."""
+def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=None) -> None:
+    """Adds ``table`` to the CLI's subparsers, over the scenes of ``sources`` and, with
+    ``resolve(args, sources) -> (scene names, sources)``, whatever else it resolves (scene
+    files)."""
     table = subparsers.add_parser(
         "table", help="replay every method on logged episodes; write Table II and Fig. 5"
     )
     table.add_argument("--runs", type=int, default=20, help="seeds 0..RUNS-1 per scene")
     table.add_argument("--scenes", nargs="+", required=True,
-                       help=f"scene names ({', '.join(sources)})")
+                       help=f"scene names ({', '.join(sources)})"
+                            + (", scene files or folders of them" if resolve else ""))
     table.add_argument("--methods", nargs="+", default=list(TRACKER_NAMES),
                        help=f"tracking methods (default: {' '.join(TRACKER_NAMES)})")
     table.add_argument("--out", required=True, help="output folder (logs, runs.csv, table)")
@@ -248,13 +252,19 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES) -> None:
                        help="local process pool, or a Dask cluster")
     table.add_argument("--scheduler", default=None,
                        help="Dask scheduler address (default: start a local cluster)")
-    table.set_defaults(run=functools.partial(run_table_command, sources=sources))
+    table.set_defaults(run=functools.partial(run_table_command, sources=sources,
+                                             resolve=resolve))
 
 
-def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOURCES) -> int:
-    """Handler of ``stucco-drake table``: 0 done, 1 interrupted (rerun resumes), 2 bad input."""
+def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOURCES,
+                      resolve=None) -> int:  # fmt: skip
+    """Handler of ``stucco-drake table``: 0 done, 1 interrupted (rerun resumes), 2 bad input.
+    ``resolve`` as :func:`add_table_command`'s; each scene's set is printed first."""
+    scenes = args.scenes
     try:
-        check_names(args.scenes, args.methods, sources)
+        if resolve is not None:
+            scenes, sources = resolve(args.scenes, sources)
+        check_names(scenes, args.methods, sources)
         if args.scheduler is not None and args.executor != "dask":
             raise ValueError("--scheduler needs --executor dask")
         stucco_params = (None if args.stucco_params is None
@@ -263,9 +273,10 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
     except (ValueError, RuntimeError) as error:
         print(f"stucco-drake table: error: {error}", file=sys.stderr)
         return 2
+    print(describe_sets({scene: sources[scene].scene_set for scene in scenes}))
     try:
         with executor:
-            rows = make_table(args.scenes, args.methods, args.runs, args.out, executor,
+            rows = make_table(scenes, args.methods, args.runs, args.out, executor,
                               sources=sources, dx_model=args.dx_model,
                               stucco_params=stucco_params,
                               filter_stream=args.filter_stream)

@@ -27,11 +27,13 @@ class EpisodeSource:
             primitive ``robot_shape``).
         grasp: ``grasp(log, tracker) -> bool`` run after replay (None: no grasp, the row's
             grasp success stays empty).
+        scene_set: the evaluation set the scene belongs to (see :mod:`stucco_drake.eval.sets`).
     """
 
     produce: Callable[[str, int], EpisodeLog]
     penetration: Callable[[EpisodeLog], RobotPenetration] | None = None
     grasp: GraspCheck | None = None
+    scene_set: str = "other"
 
     def penetration_for(self, log: EpisodeLog, method: str) -> RobotPenetration | None:
         """The pxpen ``method`` needs on ``log``: STUCCO's from ``penetration``; None for the

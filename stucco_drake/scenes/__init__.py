@@ -8,6 +8,7 @@ from stucco_drake.scenes.scene_file import (
     load_scene,
     load_scene_text,
     resolve_scene_path,
+    scene_paths,
 )
 
 __all__ = [
@@ -19,4 +20,5 @@ __all__ = [
     "load_scene",
     "load_scene_text",
     "resolve_scene_path",
+    "scene_paths",
 ]

@@ -130,6 +130,10 @@ class SceneFile:
     Attributes:
         name: the scene's short name (FB, BC, ...).
         description: free text.
+        base: for a randomized layout (see :mod:`stucco_drake.scenes.randomize`), the name of
+            the scene it was drawn from, whose actions and target it keeps; "" for a scene of
+            its own.
+        layout_seed: a randomized layout's seed (its generator's), None for a scene of its own.
         robot_base: [x, y, z, yaw] of the iiwa's base link in the world (m, m, m, rad). With
             z > 0 the base stands on a welded pedestal column from the table top up.
         workspace: [x_min, x_max, y_min, y_max] box the gripper may be sent to (m); see
@@ -154,6 +158,8 @@ class SceneFile:
 
     name: str = ""
     description: str = ""
+    base: str = ""
+    layout_seed: int | None = None
     robot_base: list[float] = dataclasses.field(default_factory=lambda: [-0.22, 0.0, 0.4, 0.0])
     workspace: list[float] = dataclasses.field(default_factory=lambda: [-0.05, 0.42, -0.3, 0.3])
     # Measured by IK for a base 0.4 m up (0.10-0.70 m), less a margin from the stretched arm.
@@ -202,6 +208,19 @@ def resolve_scene_path(name_or_path: str | Path) -> Path:
     return DIAGRAMS_DIR / f"{name_or_path}.yaml"
 
 
+def scene_paths(name_or_path: str | Path) -> list[Path]:
+    """The scene files a scene argument stands for: a folder's ``*.yaml`` files (sorted by
+    name), else the one file :func:`resolve_scene_path` gives. SceneFileError for a folder
+    without any."""
+    path = Path(name_or_path)
+    if not path.is_dir():
+        return [resolve_scene_path(name_or_path)]
+    files = sorted(p for p in path.iterdir() if p.suffix in (".yaml", ".yml") and p.is_file())
+    if not files:
+        raise SceneFileError(f"{path}: <folder>: holds no .yaml scene file")
+    return files
+
+
 def load_scene(name_or_path: str | Path) -> SceneFile:
     """Reads and checks a scene file; raises :class:`SceneFileError` (one line) on any fault."""
     path = resolve_scene_path(name_or_path)
@@ -245,6 +264,8 @@ def _check(scene: SceneFile) -> None:
             raise _BadValue(key, reason)
 
     need(bool(scene.name), "name", "must be a non-empty string")
+    need((scene.layout_seed is None) == (not scene.base), "layout_seed",
+         "a randomized layout names both its base scene and its layout_seed")
     need(len(scene.robot_base) == 4, "robot_base", "expected [x, y, z, yaw]")
     need(len(scene.workspace) == 4, "workspace", "expected [x_min, x_max, y_min, y_max]")
     need(len(scene.reach) == 2 and 0 <= scene.reach[0] < scene.reach[1], "reach",
