@@ -22,6 +22,7 @@ from pydrake.multibody.parsing import ModelDirective
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from stucco_drake.core import SoftTrackingParams
+from stucco_drake.inputs import InputError
 from stucco_drake.models import resolve_model_url
 
 #: Folder of the shipped scene files, one ``<name>.yaml`` per scene.
@@ -33,7 +34,7 @@ _APPROXIMATIONS = ("sap", "lagged", "similar", "tamsi")
 _SURFACES = ("polygon", "triangle")
 
 
-class SceneFileError(ValueError):
+class SceneFileError(InputError):
     """A scene file could not be read; the message is one line: ``<file>: <key>: <reason>``."""
 
 
