@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from stucco_drake.core.baselines import TRACKER_NAMES
 from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
 from stucco_drake.eval.cli_table import check_names
+from stucco_drake.eval.results import RunResults
 from stucco_drake.eval.runner import RunInterrupted, make_executor
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
 from stucco_drake.eval.sweep import AMBIGUOUS, parse_grid, run_sweep, tuned_path
@@ -57,6 +58,10 @@ def run_sweep_command(args: argparse.Namespace,
     except ValueError as error:
         raise InputError(str(error)) from None
     out = prepare_output_folder("--out", args.out)
+    try:
+        RunResults(out / "sweep.csv").rows()  # one of another version is refused now
+    except ValueError as error:
+        raise InputError(str(error)) from None
     executor = make_executor("process", args.workers)
     try:
         with executor:

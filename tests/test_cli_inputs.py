@@ -77,6 +77,8 @@ def paths(tmp_path):
     (tmp_path / "no_package.yaml").write_text(fb.replace("stucco_drake_models", "no_such_pkg"))
     (tmp_path / "typo.yaml").write_text("lenght: 0.02\n")
     (tmp_path / "broken.yaml").write_text("length: [0.02\n")
+    (tmp_path / "old_sweep").mkdir()
+    (tmp_path / "old_sweep" / "sweep.csv").write_text("scene,seed,method,fmi\n")
     return tmp_path
 
 
@@ -131,6 +133,8 @@ BAD_INPUTS = {
                             "--out {tmp}/a_file: is a file, not a folder"),
     "table out under a file": ("table --scenes SYN2 --out {tmp}/a_file/t",
                                "--out {tmp}/a_file/t: {tmp}/a_file is a file, not a folder"),
+    "sweep.csv of another version": ("sweep --method dbscan --scenes SYN2 --out {tmp}/old_sweep",
+                                     "old_sweep/sweep.csv: not a runs file of this version"),
     "sweep out is a file": ("sweep --method dbscan --scenes SYN2 --out {tmp}/a_file",
                             "--out {tmp}/a_file: is a file, not a folder"),
     "sim record under a file": ("sim --scene FB --record {tmp}/a_file/fb.html",
@@ -154,12 +158,15 @@ def test_a_bad_input_is_one_error_line_before_any_work(case, paths, tripwire, ca
     )
 
 
-def test_a_table_folder_of_other_settings_is_refused_before_any_work(tmp_path, tripwire,
-                                                                      capsys):  # fmt: skip
+def test_a_table_folder_of_other_settings_or_versions_is_refused_before_any_work(
+    tmp_path, tripwire, capsys
+):
     argv = ["table", "--scenes", "SYN2", "--out", str(tmp_path)]
     with pytest.raises(WorkStarted):  # records this folder's settings, then works
         main([*argv, "--dx-model", "normal"])
     assert_one_line_error(argv, capsys, "table_config.yaml", "--dx-model normal, not ee")
+    (tmp_path / "runs.csv").write_text("scene,seed,method,fmi\nSYN2,0,dbscan,1\n")
+    assert_one_line_error([*argv, "--dx-model", "normal"], capsys, "runs.csv: not a runs file")
 
 
 @pytest.mark.skipif(

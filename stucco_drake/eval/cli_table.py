@@ -271,9 +271,11 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
         raise InputError(str(error)) from None
     out = prepare_output_folder("--out", args.out)
     try:
+        # OUT's rows of other settings, or a runs file of another version, are refused now.
         check_table_config(out, args.dx_model, stucco_params, args.filter_stream)
+        RunResults(out / "runs.csv").rows()
         executor = make_executor(args.executor, args.workers, args.scheduler)
-    except (ValueError, RuntimeError) as error:  # OUT holds other settings' rows; no Dask
+    except (ValueError, RuntimeError) as error:  # RuntimeError: the Dask executor without Dask
         raise InputError(str(error)) from None
     try:
         with executor:
