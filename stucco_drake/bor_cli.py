@@ -14,6 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
+from stucco_drake.inputs import (
+    InputError,
+    non_negative_int,
+    positive_int,
+    prepare_output_file,
+    read_stucco_params,
+)
+
 #: Nesting depth of the wiring picture: the scene Diagram stays one box.
 DIAGRAM_DEPTH = 1
 
@@ -30,8 +38,9 @@ def add_run_command(subparsers) -> None:
                      help="scene name (diagrams/<name>.yaml, e.g. FB), a scene file path, or a "
                           "folder of scene files (runs each)")
     run.add_argument("--method", default="stucco", choices=TRACKER_NAMES)
-    run.add_argument("--seed", type=int, default=0, help="seed of every random stream")
-    run.add_argument("--actions", type=int, default=None,
+    run.add_argument("--seed", type=non_negative_int, default=0,
+                     help="seed of every random stream")
+    run.add_argument("--actions", type=positive_int, default=None,
                      help="play only the first N actions (default: all)")
     run.add_argument("--dx-model", choices=DX_MODELS, default="ee",
                      help=f"how tracked contacts move ({DX_MODELS_SUMMARY})")
@@ -65,34 +74,31 @@ def _grasp_hook(enabled: bool):
 
 def run_bor(args: argparse.Namespace) -> int:
     from stucco_drake.bor_episode import run_episode
-    from stucco_drake.core.params import SoftTrackingParams
     from stucco_drake.scenes import load_scene, scene_paths
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 
-    # A folder runs each of its scenes; a bad scene file is reported by the CLI's main.
+    # Bad inputs raise InputError, which the CLI's main reports, before any simulation; the
+    # outputs are prepared last, so that nothing is created for a command that fails.
+    if args.stucco_params is not None and args.method != "stucco":
+        raise InputError(f"--stucco-params is for --method stucco, not {args.method}")
+    params = read_stucco_params(args.stucco_params)
+    # A folder runs each of its scenes.
     scenes = [load_scene(path) for path in scene_paths(args.scene)]
-    params = None
-    try:
-        if len(scenes) > 1 and (args.record or args.plot):
-            raise ValueError(f"--record and --plot take one scene, not a folder of {len(scenes)}")
-        if args.stucco_params is not None:
-            if args.method != "stucco":
-                raise ValueError(f"--stucco-params is for --method stucco, not {args.method}")
-            params = SoftTrackingParams.from_yaml(Path(args.stucco_params))
-    except ValueError as error:
-        print(f"stucco-drake run: error: {error}", file=sys.stderr)
-        return 2
-    meshcat = start_meshcat(args.meshcat, args.record)
+    if len(scenes) > 1 and (args.record or args.plot):
+        raise InputError(f"--record and --plot take one scene, not a folder of {len(scenes)}")
+    record = prepare_output_file("--record", args.record)
+    plot = prepare_output_file("--plot", args.plot)
+    meshcat = start_meshcat(args.meshcat, record)
     for scene in scenes:
         result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
                              grasp=_grasp_hook(not args.no_grasp), dx_model=args.dx_model,
                              tracker_params=params)
         print(result.summary(), flush=True)
-    if args.record:
-        save_recording(meshcat, args.record)
-    if args.plot:
-        plot_episode(result, args.plot)
-        print(f"plot: {args.plot}")
+    if record:
+        save_recording(meshcat, record)
+    if plot:
+        plot_episode(result, plot)
+        print(f"plot: {plot}")
     return 0
 
 
@@ -157,9 +163,11 @@ def plot_episode(result, path: str | Path) -> None:
 # --------------------------------------------------------------------------------- diagram
 def add_diagram_command(subparsers) -> None:
     """Adds ``diagram`` to the CLI's subparsers."""
+    from stucco_drake.core.baselines import TRACKER_NAMES
+
     diagram = subparsers.add_parser("diagram", help="write the BOR Diagram's wiring picture")
     diagram.add_argument("--scene", default="FB", help="scene name or scene file path")
-    diagram.add_argument("--method", default="stucco")
+    diagram.add_argument("--method", default="stucco", choices=TRACKER_NAMES)
     diagram.add_argument("--out", default="diagrams/bor.svg",
                          help="output .svg (also writes the .dot source next to it) or .dot")
     diagram.set_defaults(run=run_diagram)  # fmt: skip
@@ -180,8 +188,9 @@ def normalized_graphviz(text: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def bor_graphviz(scene: str = "FB", method: str = "stucco") -> str:
-    """The normalized Graphviz source of the BOR Diagram of ``scene``."""
+def bor_graphviz(scene="FB", method: str = "stucco") -> str:
+    """The normalized Graphviz source of the BOR Diagram of ``scene`` (a SceneFile or a scene
+    name)."""
     from stucco_drake.bor import build_bor_diagram
 
     diagram = build_bor_diagram(scene, method).diagram
@@ -189,10 +198,12 @@ def bor_graphviz(scene: str = "FB", method: str = "stucco") -> str:
 
 
 def run_diagram(args: argparse.Namespace) -> int:
-    out = Path(args.out)
-    source = bor_graphviz(args.scene, args.method)
-    dot_path = out.with_suffix(".dot")
-    dot_path.parent.mkdir(parents=True, exist_ok=True)
+    from stucco_drake.scenes import load_scene
+
+    scene = load_scene(args.scene)  # a bad scene or output raises InputError for the CLI's main
+    out = prepare_output_file("--out", args.out)
+    dot_path = prepare_output_file("--out", out.with_suffix(".dot"))
+    source = bor_graphviz(scene, args.method)
     dot_path.write_text(source)
     print(f"graphviz source: {dot_path}")
     if out.suffix == ".dot":

@@ -12,7 +12,7 @@ from stucco_drake.bor_cli import add_diagram_command, add_run_command
 from stucco_drake.bor_log import BOR_SOURCES, table_scenes
 from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES
-from stucco_drake.scenes import SceneFileError
+from stucco_drake.inputs import InputError, non_negative_int
 from stucco_drake.scenes.cli_sim import add_sim_command
 from stucco_drake.scenes_cli import add_scenes_command
 from stucco_drake.sweep_cli import add_sweep_command
@@ -57,11 +57,21 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+class OneLineErrorParser(argparse.ArgumentParser):
+    """An ArgumentParser that reports a bad argument in one line, as :func:`main` reports
+    every other bad input (argparse's own report adds the usage block); its subcommands'
+    parsers are of this class too."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="stucco-drake", description=__doc__)
+    parser = OneLineErrorParser(prog="stucco-drake", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
     demo = commands.add_parser("demo", help="run the synthetic key-case demo and print metrics")
-    demo.add_argument("--seed", type=int, default=0, help="seed of the tracker's generator")
+    demo.add_argument("--seed", type=non_negative_int, default=0,
+                      help="seed of the tracker's generator")
     demo.set_defaults(run=_demo)
     add_sim_command(commands)
     add_scenes_command(commands)
@@ -73,11 +83,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Runs one command; exit status 0 done, 1 interrupted (a rerun resumes), 2 bad input.
+
+    Every bad input is reported before any simulation starts, in one line: argparse's checks
+    by :class:`OneLineErrorParser` (it exits), the commands' own checks (scene files,
+    parameter files, output paths, ...) as an :class:`~stucco_drake.inputs.InputError` here.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
     try:
         return args.run(args)
-    except SceneFileError as error:  # one line naming the file and key, no traceback
-        print(f"error: {error}", file=sys.stderr)
+    except InputError as error:  # one line naming the input, no traceback
+        message = " ".join(str(error).split())
+        print(f"{parser.prog} {args.command}: error: {message}", file=sys.stderr)
         return 2
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path, PurePosixPath
 
-from pydrake.multibody.parsing import Parser
+from pydrake.multibody.parsing import PackageMap, Parser
 from pydrake.multibody.tree import ModelInstanceIndex
 
 PACKAGE_NAME = "stucco_drake_models"
@@ -36,8 +36,9 @@ FLANGE_TO_GRIPPER_FRAME_Z = 0.12
 def configure_parser(parser: Parser) -> Parser:
     """Registers the ``stucco_drake_models`` package with ``parser`` (idempotent); returns it.
 
-    This is the one place that adds our ``package.xml`` to a package map. Call it on every
-    ``Parser`` (simulation plant, controller plant, observer plant) before adding models.
+    With :func:`resolve_model_url` it is the one place that adds our ``package.xml`` to a
+    package map. Call it on every ``Parser`` (simulation plant, controller plant, observer
+    plant) before adding models.
 
     It also removes Drake's remote ``drake_models`` package from the map, so that a stray
     ``package://drake_models/...`` reference fails at once ("unknown package") instead of
@@ -45,12 +46,29 @@ def configure_parser(parser: Parser) -> Parser:
     with the pip wheel of Drake: there, every ``Parser`` construction then raises, because the
     default package map registers ``drake_models`` as a download-only package.)
     """
-    package_map = parser.package_map()
+    _configure_package_map(parser.package_map())
+    return parser
+
+
+def _configure_package_map(package_map: PackageMap) -> PackageMap:
     if package_map.Contains("drake_models"):
         package_map.Remove("drake_models")
     if not package_map.Contains(PACKAGE_NAME):
         package_map.AddPackageXml(str(MODELS_DIR / "package.xml"))
-    return parser
+    return package_map
+
+
+def resolve_model_url(url: str) -> Path:
+    """The file a model URL (``package://...``, ``file://...``) names, resolved as a
+    :func:`configure_parser`-ed Parser resolves it; one-line ValueError when it names no file,
+    so that a scene can be checked before its plant is built."""
+    try:
+        path = Path(_configure_package_map(PackageMap()).ResolveUrl(url))
+    except RuntimeError as error:
+        raise ValueError(str(error).removeprefix("error: ")) from None
+    if not path.is_file():
+        raise ValueError(f"URI '{url}' resolved to '{path}', which is not a file")
+    return path
 
 
 def model_url(relative: str) -> str:

@@ -4,6 +4,7 @@ import argparse
 import concurrent.futures as cf
 import dataclasses
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -23,6 +24,7 @@ from stucco_drake.eval import (
     synthetic_episode,
 )
 from stucco_drake.eval.cli_table import add_table_command, check_names, make_table
+from stucco_drake.inputs import InputError
 
 ROW_KEYS = ("scene", "seed", "method")
 
@@ -136,6 +138,96 @@ def test_a_dead_worker_is_reported_and_a_rerun_completes_the_table(tmp_path):
     assert {(s, int(seed), m) for s, seed, m in keys} == set(tasks)
 
 
+#: A table on SYN2 whose STUCCO replay of seed 1 never ends (run in a process of its own).
+STALLING_TABLE = """
+import time
+from stucco_drake.eval.cli_table import make_table
+from stucco_drake.eval.runner import make_executor
+from stucco_drake.eval.sources import EpisodeSource
+from stucco_drake.eval.synthetic_episode import synthetic_episode
+
+def penetration(log):
+    if log.seed == 1:
+        time.sleep(600)
+    return None  # as the synthetic source: replay builds pxpen from the log's robot shape
+
+def run(out):
+    sources = {"SYN2": EpisodeSource(synthetic_episode, penetration)}
+    with make_executor("process", workers=2) as executor:
+        make_table(["SYN2"], ["dbscan", "stucco"], 2, out, executor, progress=False,
+                   sources=sources)
+"""
+
+
+def runs_without_wall_time(path: Path) -> list[str]:
+    """The lines of a runs file, sorted, without the wall time (which no two runs share)."""
+    header, *lines = path.read_text().splitlines()
+    wall = header.split(",").index("wall_time_s")
+    return sorted(",".join(f for i, f in enumerate(line.split(",")) if i != wall)
+                  for line in lines)  # fmt: skip
+
+
+def test_a_killed_table_keeps_its_rows_and_the_rerun_computes_only_the_rest(tmp_path,
+                                                                             monkeypatch):
+    """SIGKILL of a table with two workers, stuck in its last run: the finished rows stay,
+    the rerun computes the missing run only, and the result is an uninterrupted table's."""
+    import stucco_drake.eval.cli_table as cli_table
+
+    (tmp_path / "stalling_table.py").write_text(STALLING_TABLE)
+    out = tmp_path / "killed"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(tmp_path), *filter(None, [os.environ.get("PYTHONPATH")])])}  # fmt: skip
+    code = f"import stalling_table; stalling_table.run({str(out)!r})"
+    table = subprocess.Popen([sys.executable, "-c", code], env=env, start_new_session=True,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+    finished = {("SYN2", 0, "dbscan"), ("SYN2", 0, "stucco"), ("SYN2", 1, "dbscan")}
+    try:
+        deadline = time.monotonic() + 300
+        while RunResults(out / "runs.csv").done() != finished:
+            assert table.poll() is None, table.stderr.read().decode()
+            assert time.monotonic() < deadline, "the table did not reach its stuck run"
+            time.sleep(0.1)
+        os.kill(table.pid, signal.SIGKILL)  # the table's own process, as `kill -9 PID`
+        assert table.wait(timeout=30) == -signal.SIGKILL
+    finally:  # then its workers, one of them stuck for 600 s
+        try:
+            os.killpg(table.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        table.wait(timeout=30)
+        table.stderr.close()
+    killed_lines = (out / "runs.csv").read_text().splitlines()
+    assert RunResults(out / "runs.csv").done() == finished
+    log_stamps = {p.name: p.stat().st_mtime_ns for p in (out / "logs").iterdir()}
+    assert sorted(log_stamps) == ["SYN2_0.npz", "SYN2_1.npz"]
+
+    replayed, simulated = [], []
+    real_replay, real_produce = cli_table.replay, cli_table.produce_episode
+
+    def counted_replay(log, method, **kwargs):
+        replayed.append((log.scene, log.seed, method))
+        return real_replay(log, method, **kwargs)
+
+    def counted_produce(episode, *args):
+        simulated.append(episode)
+        return real_produce(episode, *args)
+
+    monkeypatch.setattr(cli_table, "replay", counted_replay)
+    monkeypatch.setattr(cli_table, "produce_episode", counted_produce)
+    with cf.ThreadPoolExecutor(2) as executor:
+        make_table(["SYN2"], ["dbscan", "stucco"], 2, out, executor, progress=False)
+        assert replayed == [("SYN2", 1, "stucco")] and simulated == []
+        lines = (out / "runs.csv").read_text().splitlines()
+        assert lines[: len(killed_lines)] == killed_lines and len(lines) == 5  # kept as written
+        assert {p.name: p.stat().st_mtime_ns for p in (out / "logs").iterdir()} == log_stamps
+        uninterrupted = tmp_path / "uninterrupted"
+        make_table(["SYN2"], ["dbscan", "stucco"], 2, uninterrupted, executor, progress=False)
+    assert len(simulated) == 2 and len(replayed) == 1 + 4
+    assert runs_without_wall_time(out / "runs.csv") == runs_without_wall_time(
+        uninterrupted / "runs.csv")
+    assert (out / "table.md").read_text() == (uninterrupted / "table.md").read_text()
+
+
 def test_small_table_writes_layout_and_figure_and_resumes(tmp_path):
     scenes, methods = ("SYN2", "SYNC"), ("stucco", "dbscan")
     with make_executor("process", workers=2) as executor:
@@ -212,16 +304,16 @@ def test_another_filter_stream_redraws_stucco_and_leaves_the_baselines(tmp_path)
     assert all(np.isfinite(r["ce_cm"]) for r in rows[1].values())
 
 
-def test_bad_names_raise_naming_them(capsys, tmp_path):
+def test_bad_names_raise_naming_them(tmp_path):
     with pytest.raises(ValueError, match=r"'FOO'.*'optics'") as error:
         check_names(["SYN2", "FOO"], ["stucco", "optics"])
     assert "\n" not in str(error.value)
     parser = argparse.ArgumentParser()
     add_table_command(parser.add_subparsers())
-    args = parser.parse_args(["table", "--scenes", "SYNX", "--out", str(tmp_path)])
-    assert args.run(args) == 2
-    err = capsys.readouterr().err
-    assert "'SYNX'" in err and err.count("\n") == 1
+    args = parser.parse_args(["table", "--scenes", "SYNX", "--out", str(tmp_path / "out")])
+    with pytest.raises(InputError, match="'SYNX'"):
+        args.run(args)
+    assert not (tmp_path / "out").exists()
     with pytest.raises(ValueError, match="'spark'"):
         make_executor("spark")
 

@@ -11,6 +11,7 @@ from stucco_drake.core.contact_motion import normal_spread
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.sdf import GridSdf
 from stucco_drake.eval.cli_table import add_table_command
+from stucco_drake.inputs import InputError
 
 A = [0.10, 0.0, 0.0]  # on one object, touched first by the robot's +x face
 D = [0.21, 0.09, 0.0]  # on a second object, touched next
@@ -114,7 +115,7 @@ def test_bad_rule_parameters_raise_naming_them(override, name):
         SoftTrackingParams.from_mapping(override)
 
 
-def test_the_rule_loads_from_yaml_and_the_table_command_takes_it(tmp_path, capsys):
+def test_the_rule_loads_from_yaml_and_the_table_command_takes_it(tmp_path):
     path = tmp_path / "stucco.yaml"
     path.write_text("touched_side_margin: 0.002\n")
     assert SoftTrackingParams.from_yaml(path).touched_side_margin == 0.002
@@ -124,6 +125,7 @@ def test_the_rule_loads_from_yaml_and_the_table_command_takes_it(tmp_path, capsy
     path.write_text("touched_side: 0.002\n")  # misspelt
     args = parser.parse_args(["table", "--scenes", "SYN2", "--out", str(tmp_path / "out"),
                               "--stucco-params", str(path)])  # fmt: skip
-    assert args.run(args) == 2
-    err = capsys.readouterr().err
-    assert "touched_side" in err and err.count("\n") == 1
+    with pytest.raises(InputError, match=r"unknown key.*touched_side") as error:
+        args.run(args)
+    assert "\n" not in str(error.value)
+    assert not (tmp_path / "out").exists()  # refused before anything was made

@@ -152,14 +152,22 @@ class SoftTrackingParams:
 
     @classmethod
     def from_yaml(cls, source: str | Path) -> SoftTrackingParams:
-        """Load from a YAML file path or a YAML string holding a mapping (see from_mapping)."""
-        path = Path(source) if not isinstance(source, str) or "\n" not in source else None
-        if path is not None and path.suffix in (".yaml", ".yml"):
-            if not path.is_file():
+        """Load from a YAML file (a path object, or a one-line string ending in .yaml or .yml)
+        or a YAML string holding a mapping (see from_mapping)."""
+        is_file = not isinstance(source, str) or (
+            "\n" not in source and Path(source).suffix in (".yaml", ".yml")
+        )
+        if is_file:
+            path = Path(source)
+            if not path.exists():
                 raise ValueError(f"SoftTrackingParams: no such file {path}")
-            text, where = path.read_text(), str(path)
+            try:
+                text, where = path.read_text(encoding="utf-8"), str(path)
+            except (OSError, UnicodeDecodeError) as error:
+                reason = getattr(error, "strerror", None) or "not UTF-8 text"
+                raise ValueError(f"SoftTrackingParams: cannot read {path} ({reason})") from None
         else:
-            text, where = str(source), "<string>"
+            text, where = source, "<string>"
         try:
             data = yaml.safe_load(text)
         except yaml.YAMLError as error:

@@ -28,6 +28,13 @@ from stucco_drake.eval.runner import Progress, RunInterrupted, make_executor, ru
 from stucco_drake.eval.sets import describe_sets
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
 from stucco_drake.eval.table import plot_fmi_ce, write_table
+from stucco_drake.inputs import (
+    InputError,
+    non_negative_int,
+    positive_int,
+    prepare_output_folder,
+    read_stucco_params,
+)
 
 Sources = Mapping[str, EpisodeSource]
 
@@ -231,7 +238,8 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
     table = subparsers.add_parser(
         "table", help="replay every method on logged episodes; write Table II and Fig. 5"
     )
-    table.add_argument("--runs", type=int, default=20, help="seeds 0..RUNS-1 per scene")
+    table.add_argument("--runs", type=positive_int, default=20,
+                       help="seeds 0..RUNS-1 per scene")
     table.add_argument("--scenes", nargs="+", required=True,
                        help=f"scene names ({', '.join(sources)})"
                             + (", scene files or folders of them" if resolve else ""))
@@ -242,11 +250,11 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
                        help=f"how contact points move ({DX_MODELS_SUMMARY})")
     table.add_argument("--stucco-params", metavar="PARAMS.yaml", default=None,
                        help="STUCCO's parameters as YAML overrides of Table I (default: Table I)")
-    table.add_argument("--filter-stream", type=int, default=0, metavar="K",
+    table.add_argument("--filter-stream", type=non_negative_int, default=0, metavar="K",
                        help="seed the trackers with the episode's seed + K x "
                             f"{STREAM_STRIDE} (default 0: the episode's seed); another K "
                             "replays the same episodes with other draws")
-    table.add_argument("--workers", type=int, default=None,
+    table.add_argument("--workers", type=positive_int, default=None,
                        help="parallel workers (default: one per CPU)")
     table.add_argument("--executor", choices=("process", "dask"), default="process",
                        help="local process pool, or a Dask cluster")
@@ -258,35 +266,37 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
 
 def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOURCES,
                       resolve=None) -> int:  # fmt: skip
-    """Handler of ``stucco-drake table``: 0 done, 1 interrupted (rerun resumes), 2 bad input.
-    ``resolve`` as :func:`add_table_command`'s; each scene's set is printed first."""
-    scenes = args.scenes
+    """Handler of ``stucco-drake table``: 0 done, 1 interrupted (rerun resumes); a bad input
+    raises InputError (the CLI's main reports it) before any simulation. ``resolve`` as
+    :func:`add_table_command`'s; each scene's set is printed first."""
+    stucco_params = read_stucco_params(args.stucco_params)
+    if args.scheduler is not None and args.executor != "dask":
+        raise InputError("--scheduler needs --executor dask")
     try:
+        scenes = args.scenes
         if resolve is not None:
             scenes, sources = resolve(args.scenes, sources)
         check_names(scenes, args.methods, sources)
-        if args.scheduler is not None and args.executor != "dask":
-            raise ValueError("--scheduler needs --executor dask")
-        stucco_params = (None if args.stucco_params is None
-                         else SoftTrackingParams.from_yaml(Path(args.stucco_params)))
+    except ValueError as error:
+        raise InputError(str(error)) from None
+    out = prepare_output_folder("--out", args.out)
+    try:
+        # OUT's rows of other settings, or a runs file of another version, are refused now.
+        check_table_config(out, args.dx_model, stucco_params, args.filter_stream)
+        RunResults(out / "runs.csv").rows()
         executor = make_executor(args.executor, args.workers, args.scheduler)
-    except (ValueError, RuntimeError) as error:
-        print(f"stucco-drake table: error: {error}", file=sys.stderr)
-        return 2
+    except (ValueError, RuntimeError) as error:  # RuntimeError: the Dask executor without Dask
+        raise InputError(str(error)) from None
     print(describe_sets({scene: sources[scene].scene_set for scene in scenes}))
     try:
         with executor:
-            rows = make_table(scenes, args.methods, args.runs, args.out, executor,
+            rows = make_table(scenes, args.methods, args.runs, out, executor,
                               sources=sources, dx_model=args.dx_model,
                               stucco_params=stucco_params,
                               filter_stream=args.filter_stream)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1
-    except ValueError as error:
-        print(f"stucco-drake table: error: {error}", file=sys.stderr)
-        return 2
-    out = Path(args.out)
     print((out / "table.md").read_text(encoding="utf-8"), end="")
     print(f"{len(rows)} runs in {out / 'runs.csv'}; figure {out / 'fmi_ce.png'}")
     return 0

@@ -6,13 +6,15 @@ import argparse
 
 import numpy as np
 
+from stucco_drake.inputs import positive_int, prepare_output_file
+
 
 def add_sim_command(commands) -> None:
     """Adds ``sim`` to the CLI's subparsers."""
     sim = commands.add_parser("sim", help="play a scene's prescribed actions in simulation")
     sim.add_argument("--scene", required=True,
                      help="scene name (diagrams/<name>.yaml, e.g. FB) or a path to a scene file")
-    sim.add_argument("--actions", type=int, default=None,
+    sim.add_argument("--actions", type=positive_int, default=None,
                      help="play only the first N actions (default: all)")
     sim.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
     sim.add_argument("--record", metavar="OUT.html",
@@ -25,8 +27,11 @@ def run_sim(args: argparse.Namespace) -> int:
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
     from stucco_drake.scenes.playback import play
 
-    scene = load_scene(args.scene)  # a bad scene file is reported by the CLI's main
-    meshcat = start_meshcat(args.meshcat, args.record)
+    # Bad inputs raise InputError, which the CLI's main reports, before any simulation; the
+    # output is prepared last, so that nothing is created for a command that fails.
+    scene = load_scene(args.scene)
+    record = prepare_output_file("--record", args.record)
+    meshcat = start_meshcat(args.meshcat, record)
     built = build_scene(scene, meshcat=meshcat)
 
     def progress(rec):
@@ -41,6 +46,6 @@ def run_sim(args: argparse.Namespace) -> int:
     for name, start in records[0].objects.items():
         moved = np.linalg.norm(records[-1].objects[name][:2] - start[:2]) * 1000
         print(f"  {name}: moved {moved:.1f} mm")
-    if args.record:
-        save_recording(meshcat, args.record)
+    if record:
+        save_recording(meshcat, record)
     return 0

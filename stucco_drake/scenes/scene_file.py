@@ -22,6 +22,8 @@ from pydrake.multibody.parsing import ModelDirective
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from stucco_drake.core import SoftTrackingParams
+from stucco_drake.inputs import InputError
+from stucco_drake.models import resolve_model_url
 
 #: Folder of the shipped scene files, one ``<name>.yaml`` per scene.
 DIAGRAMS_DIR = Path(__file__).resolve().parents[2] / "diagrams"
@@ -32,7 +34,7 @@ _APPROXIMATIONS = ("sap", "lagged", "similar", "tamsi")
 _SURFACES = ("polygon", "triangle")
 
 
-class SceneFileError(ValueError):
+class SceneFileError(InputError):
     """A scene file could not be read; the message is one line: ``<file>: <key>: <reason>``."""
 
 
@@ -319,6 +321,20 @@ def _check(scene: SceneFile) -> None:
         scene.tracker_params()
     except ValueError as error:
         raise _BadValue("tracker", _one_line(error)) from None
+    _check_model_files(scene)
+
+
+def _check_model_files(scene: SceneFile) -> None:
+    """Every file the directives name exists (Drake finds out only when it builds the plant)."""
+    for i, directive in enumerate(scene.directives):
+        for kind in ("add_model", "add_directives"):
+            entry = getattr(directive, kind)
+            if entry is None:
+                continue
+            try:
+                resolve_model_url(entry.file)
+            except ValueError as error:
+                raise _BadValue(f"directives[{i}].{kind}.file", str(error)) from None
 
 
 # ----------------------------------------------------------------------- locating a bad key

@@ -1,0 +1,113 @@
+"""Checks of what a user hands the command line, made before any work starts.
+
+A bad input is reported as one :class:`InputError` line naming it; the CLI's ``main`` prints it
+as ``stucco-drake <command>: error: <message>`` and exits with 2. Counts and seeds are checked by
+argparse through the ``type=`` functions here; output files and folders are prepared (their
+missing parent folders created, a write into them tried) by :func:`prepare_output_file` and
+:func:`prepare_output_folder` after a command's other checks and before its work, so that an
+unwritable path fails at once instead of after minutes of simulation.
+
+Only the standard library is imported at module level: every layer's command may use this.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+from pathlib import Path
+
+
+class InputError(ValueError):
+    """A bad input (an argument, or a file one names); the message is one line naming it."""
+
+
+# ------------------------------------------------------------------------- argparse types
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def positive_int(text: str) -> int:
+    """argparse ``type=`` of a count that must be 1 or more."""
+    value = _integer(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be 1 or more, got {value}")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """argparse ``type=`` of a seed or an index that must be 0 or more."""
+    value = _integer(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+# ---------------------------------------------------------------------------- output paths
+def _reason(error: OSError) -> str:
+    return error.strerror or type(error).__name__
+
+
+def _create_folder(option: str, given: Path, folder: Path) -> None:
+    """Creates ``folder`` and its missing parents for the path ``given`` to ``option``;
+    InputError naming the file in the way."""
+    existing = next(p for p in (folder, *folder.parents) if p.exists() or p == Path(p.anchor))
+    if not existing.is_dir():
+        where = "" if existing == given else f"{existing} "
+        raise InputError(f"{option} {given}: {where}is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise InputError(f"{option} {given}: cannot create {folder} ({_reason(error)})") from None
+
+
+def prepare_output_folder(option: str, path: str | os.PathLike) -> Path:
+    """The output folder ``path`` of command-line option ``option``, created if missing and
+    tried with a scratch file; InputError (one line) when it cannot be written."""
+    folder = Path(path)
+    _create_folder(option, folder, folder)
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        raise InputError(f"{option} {folder}: cannot write in it ({_reason(error)})") from None
+    return folder
+
+
+def prepare_output_file(option: str, path: str | os.PathLike | None) -> Path | None:
+    """The output file ``path`` of command-line option ``option`` (None passes through), its
+    parent folders created and the file opened for appending (and removed again when it did
+    not exist): InputError (one line) when it cannot be written. An existing file is left as
+    it is."""
+    if path is None:
+        return None
+    file = Path(path)
+    if file.is_dir():
+        raise InputError(f"{option} {file}: is a folder, not a file")
+    _create_folder(option, file, file.parent)
+    existed = file.exists()
+    try:
+        with open(file, "a"):
+            pass
+    except OSError as error:
+        raise InputError(f"{option} {file}: cannot be written ({_reason(error)})") from None
+    if not existed:
+        file.unlink()
+    return file
+
+
+# ----------------------------------------------------------------------------- input files
+def read_stucco_params(path: str | os.PathLike | None):
+    """STUCCO's parameters from the YAML file given to ``--stucco-params`` (None: None, the
+    command's default); InputError (one line) when it cannot be read or holds a bad value."""
+    if path is None:
+        return None
+    from stucco_drake.core.params import SoftTrackingParams
+
+    try:
+        return SoftTrackingParams.from_yaml(Path(path))
+    except ValueError as error:
+        raise InputError(f"--stucco-params: {error}") from None
