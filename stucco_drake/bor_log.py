@@ -30,10 +30,10 @@ from stucco_drake.bor import build_bor_diagram, collision_shapes, object_surface
 from stucco_drake.bor_episode import make_bor_simulator, run_episode
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
-from stucco_drake.core.target_pose import estimate_target_pose
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sets import PAPER_SCENES, scene_set
 from stucco_drake.eval.sources import EpisodeSource
+from stucco_drake.eval.target_estimates import rules_estimate
 from stucco_drake.grasp import build_grasp_scene, grasp_estimate
 from stucco_drake.gripper_sdf import gripper_penetration
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene, resolve_scene_path, scene_paths
@@ -42,8 +42,6 @@ from stucco_drake.systems.gripper_samples import sample_gripper_surface
 
 #: Half-width (m) of the uniform noise added to every action axis (paper Sec. V).
 ACTION_NOISE = 5e-4
-#: Fewest points of a segment for a pose fit (three pin a planar pose).
-MIN_SEGMENT_POINTS = 3
 #: Spacing (m) of the gripper surface samples for the robot-object distance (ambiguity).
 _DISTANCE_SPACING = 0.006
 
@@ -254,15 +252,11 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None):
     """
     built = _grasp_scene(log.scene if scene is None else str(scene))
     shape = target_shape(built)
-    points, labels = tracker.map_points(), np.asarray(tracker.segment())
-    if np.bincount(labels[labels >= 0], minlength=1).max() < MIN_SEGMENT_POINTS:
+    estimate = rules_estimate(np.random.default_rng([log.seed, 1]), log, tracker, shape,
+                              log_penetration(log))  # fmt: skip
+    if estimate is None:
         return None
-    estimate = estimate_target_pose(
-        np.random.default_rng([log.seed, 1]), points, labels, shape, log_penetration(log),
-        log.ee_position, log.ee_rotation[-1], min_points=MIN_SEGMENT_POINTS,
-        penetration_configs="since_touch",
-        point_steps=np.repeat(np.arange(log.n_actions), np.diff(log.contact_offsets)),
-    )  # fmt: skip
+    points = tracker.map_points()
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     context.SetTime(float(log.info.get("final_time_s", 0.0)))

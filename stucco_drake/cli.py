@@ -10,6 +10,7 @@ import numpy as np
 
 from stucco_drake.bor_cli import add_diagram_command, add_run_command
 from stucco_drake.bor_log import BOR_SOURCES, table_scenes
+from stucco_drake.estimates_cli import add_estimates_command
 from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES
 from stucco_drake.inputs import InputError, non_negative_int
@@ -75,6 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(run=_demo)
     add_sim_command(commands)
     add_scenes_command(commands)
+    add_estimates_command(commands)
     add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES}, table_scenes)
     add_run_command(commands)
     add_diagram_command(commands)

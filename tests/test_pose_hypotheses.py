@@ -101,3 +101,19 @@ def test_no_group_to_fit_is_a_one_line_error():
     points = np.array([[0.0, 0.0, HEIGHT], [0.01, 0.0, HEIGHT]])
     with pytest.raises(ValueError, match="no segment has at least 3 points"):
         pose_hypotheses(np.random.default_rng(0), points, np.array([0, 0]), BOX)
+
+
+def test_outline_error_is_zero_for_symmetric_turns_and_the_shift_otherwise():
+    from stucco_drake.core.shapes import CylinderSdf
+    from stucco_drake.eval.target_estimates import outline_error
+
+    pose = np.array([0.4, -0.2, 0.5])
+    # A box turned by pi and a cylinder turned by anything cover the same outline; the 2.5 mm
+    # tolerance is half the 5 mm outline sampling (samples need not map onto samples).
+    assert outline_error(BOX, pose, pose + [0.0, 0.0, np.pi]) < 0.0025
+    assert outline_error(CylinderSdf(0.04, 0.06), pose, pose + [0.0, 0.0, 1.0]) < 0.0025
+    # Shifted by 3 cm, every outline point is 3 cm from its old place and at least
+    # 3 cm minus a half sample from the nearest old outline point on the leading faces.
+    assert outline_error(BOX, pose, pose + [0.03, 0.0, 0.0]) == pytest.approx(0.03, abs=0.0025)
+    # A quarter turn of a 16 x 8 cm box moves its far corners by (8 - 4) cm along each axis.
+    assert outline_error(BOX, pose, pose + [0.0, 0.0, np.pi / 2]) == pytest.approx(0.04, abs=0.0025)

@@ -1,0 +1,106 @@
+"""``stucco-drake estimates``: both target-pose estimators on a table's logged episodes.
+
+Replays a method on every log of a ``table`` output folder, at that folder's recorded settings,
+and scores the segment-selection rules and the weighted hypotheses against the target's final
+pose (:func:`~stucco_drake.eval.target_estimates.score_estimates`), without simulating a grasp.
+Each row joins the table's own grasp outcome for the method (made with the rules' estimate).
+Writes ``OUT/estimates_<method>.csv`` and prints a summary per base scene.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from stucco_drake.inputs import InputError
+
+#: Outline error (m) under which an estimate is counted as near the truth in the summary.
+NEAR = 0.02
+
+
+def add_estimates_command(subparsers) -> None:
+    """Adds ``estimates`` to the CLI's subparsers."""
+    from stucco_drake.core.baselines import TRACKER_NAMES
+
+    command = subparsers.add_parser(
+        "estimates", help="score both target-pose estimators on a table folder's logs")
+    command.add_argument("--table", required=True, help="a `stucco-drake table` output folder")
+    command.add_argument("--method", default="stucco", choices=TRACKER_NAMES)
+    command.set_defaults(run=run_estimates)
+
+
+def _table_settings(out: Path):
+    from stucco_drake.core.params import SoftTrackingParams
+    from stucco_drake.eval.cli_table import TABLE_CONFIG
+
+    try:
+        config = yaml.safe_load((out / TABLE_CONFIG).read_text(encoding="utf-8"))
+        params = SoftTrackingParams.from_mapping(config["stucco_params"])
+        return config["dx_model"], params, int(config.get("filter_stream", 0))
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as error:
+        raise InputError(f"--table {out}: no readable {TABLE_CONFIG} ({error})") from None
+
+
+def _summary(rows: list[dict]) -> str:
+    lines = ["base  n  rules near/median cm  hypotheses near/median cm  confident  grasped"]
+    for base in sorted({row["base"] for row in rows}):
+        group = [row for row in rows if row["base"] == base]
+        parts = [f"{base:<4} {len(group):>2}"]
+        for name in ("rules", "hypotheses"):
+            error = np.array([row[f"{name}_outline_m"] for row in group])
+            near = int(np.sum(error < NEAR))
+            parts.append(f"{near:>2}/{len(group)} {np.nanmedian(error) * 100:6.1f}")
+        confident = np.mean([row["confidence"] for row in group])
+        grasped = [row["grasp_success"] for row in group if row["grasp_success"] is not None]
+        parts.append(f"mean {confident:.2f}")
+        parts.append(f"{sum(grasped)}/{len(grasped)}")
+        lines.append("   ".join(parts))
+    return "\n".join(lines)
+
+
+def run_estimates(args: argparse.Namespace) -> int:
+    """Handler of ``stucco-drake estimates``."""
+    from stucco_drake import bor_log
+    from stucco_drake.eval.episode_log import EpisodeLog
+    from stucco_drake.eval.replay import replay
+    from stucco_drake.eval.results import RunResults
+    from stucco_drake.eval.target_estimates import score_estimates
+
+    out = Path(args.table)
+    dx_model, params, stream = _table_settings(out)
+    paths = sorted((out / "logs").glob("*.npz"))
+    if not paths:
+        raise InputError(f"--table {out}: no episode logs in {out / 'logs'}")
+    grasped = {(row["scene"], row["seed"]): row["grasp_success"]
+               for row in RunResults(out / "runs.csv").rows()
+               if row["method"] == args.method}  # fmt: skip
+    rows = []
+    for path in paths:
+        log = EpisodeLog.load(path)
+        penetration = bor_log.log_penetration(log)
+        scored = []
+
+        def score(log, tracker, penetration=penetration, scored=scored):
+            scored.append(score_estimates(log, tracker, penetration))
+
+        replay(log, args.method, log.seed + 1000 * stream,
+               params if args.method == "stucco" else None, penetration=penetration,
+               dx_model=dx_model, grasp=score)  # fmt: skip
+        row = {"base": log.scene.split("-L")[0], **scored[0],
+               "grasp_success": grasped.get((log.scene, log.seed))}  # fmt: skip
+        rows.append(row)
+        print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) and not math.isnan(v)
+                       else f"{k}={v}" for k, v in row.items()), flush=True)  # fmt: skip
+    target = out / f"estimates_{args.method}.csv"
+    with target.open("w", newline="", encoding="utf-8") as file:
+        writer = csv.DictWriter(file, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    print(_summary(rows))
+    print(f"{len(rows)} logs; rows in {target}")
+    return 0

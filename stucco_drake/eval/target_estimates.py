@@ -1,0 +1,106 @@
+"""The target's pose estimated from a replayed episode log, and how far it is from the truth.
+
+Two estimators see the same tracker and log: the segment-selection rules of
+:func:`~stucco_drake.core.target_pose.estimate_target_pose` (what the grasp of Table II used) and
+the weighted hypotheses of :func:`~stucco_drake.core.pose_hypotheses.pose_hypotheses` (contact,
+free-space and shape evidence, with a confidence). :func:`score_estimates` measures both against
+the target's logged final pose without simulating a grasp, so rules can be developed on many
+logged layouts cheaply. Units: m, rad; world frame W. The target is object 0 of a log.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stucco_drake.core.icp import sample_outline, transform
+from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.pose_hypotheses import (
+    FreeSpace,
+    HypothesisParams,
+    PoseHypotheses,
+    point_spread,
+    pose_hypotheses,
+)
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.core.target_pose import TargetPoseEstimate, estimate_target_pose
+from stucco_drake.eval.episode_log import EpisodeLog, shape_sdf
+
+#: Fewest points of a segment for a pose fit (three pin a planar pose).
+MIN_SEGMENT_POINTS = 3
+
+
+def log_target_shape(log: EpisodeLog) -> BoxSdf | CylinderSdf:
+    """The target's (object 0's) shape in its own frame, from the log's shape rows."""
+    rows = log.object_shapes[log.shape_object == 0]
+    if len(rows) != 1 or np.any(rows[0][4:7] != 0.0):
+        raise ValueError(f"{log.scene} seed {log.seed}: the target is not one centred primitive")
+    return shape_sdf(rows[0])
+
+
+def point_steps(log: EpisodeLog) -> np.ndarray:
+    """(n,) the action (index into ``log.ee_position``) at which each contact was sensed."""
+    return np.repeat(np.arange(log.n_actions), np.diff(log.contact_offsets))
+
+
+def rules_estimate(rng, log: EpisodeLog, tracker, shape,
+                   penetration: RobotPenetration) -> TargetPoseEstimate | None:  # fmt: skip
+    """The segment-selection estimate the Table II grasp uses (30 restarts, the robot's pxpen at
+    the configs since the chosen segment was last touched), or None when no segment has
+    :data:`MIN_SEGMENT_POINTS` points."""
+    points, labels = tracker.map_points(), np.asarray(tracker.segment())
+    if np.bincount(labels[labels >= 0], minlength=1).max() < MIN_SEGMENT_POINTS:
+        return None
+    return estimate_target_pose(
+        rng, points, labels, shape, penetration, log.ee_position, log.ee_rotation[-1],
+        min_points=MIN_SEGMENT_POINTS, penetration_configs="since_touch",
+        point_steps=point_steps(log),
+    )  # fmt: skip
+
+
+def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: RobotPenetration,
+                        params: HypothesisParams | None = None) -> PoseHypotheses | None:
+    """Weighted hypotheses from the tracker's MAP points with their spread over particles
+    (when the tracker has particles) and the free space of every logged config, or None when
+    no segment has enough points."""
+    params = params or HypothesisParams()
+    points, labels = tracker.map_points(), np.asarray(tracker.segment())
+    if np.bincount(labels[labels >= 0], minlength=1).max() < params.min_explained:
+        return None
+    spread = None
+    if hasattr(tracker, "log_weights") and hasattr(tracker, "points"):
+        spread = point_spread(tracker.points, tracker.log_weights)
+    free = FreeSpace(penetration, log.ee_position, log.ee_rotation[-1], point_steps(log))
+    return pose_hypotheses(rng, points, labels, shape, spread=spread, free_space=free,
+                           params=params)  # fmt: skip
+
+
+def outline_error(shape, estimate, truth, spacing: float = 0.005) -> float:
+    """Symmetric Hausdorff distance (m) between the target's outline at two poses (x, y, yaw):
+    0 for a box turned by pi, whatever the yaw for a cylinder."""
+    outline = sample_outline(shape, spacing)
+    a, b = transform(np.array([estimate, truth], dtype=np.float64), outline)
+    d = np.sqrt(np.sum((a[:, None] - b[None]) ** 2, axis=-1))
+    return float(max(d.min(axis=0).max(), d.min(axis=1).max()))
+
+
+def score_estimates(log: EpisodeLog, tracker, penetration: RobotPenetration,
+                    params: HypothesisParams | None = None) -> dict:  # fmt: skip
+    """Both estimators on one replayed log against the target's final pose: a row with the
+    target's contact count, each estimate's position and outline errors (m; NaN when it gave
+    none) and the hypotheses' confidence and count. Generators seeded by ``[log.seed, 1]``
+    as the grasp's."""
+    shape = log_target_shape(log)
+    truth = log.object_poses[-1, 0][[0, 1, -1]]
+    row = {"scene": log.scene, "seed": int(log.seed),
+           "target_contacts": int(np.count_nonzero(log.contact_object == 0))}  # fmt: skip
+    rules = rules_estimate(np.random.default_rng([log.seed, 1]), log, tracker, shape, penetration)
+    found = hypotheses_estimate(np.random.default_rng([log.seed, 1]), log, tracker, shape,
+                                penetration, params)  # fmt: skip
+    for name, pose in (("rules", None if rules is None else rules.pose),
+                       ("hypotheses", None if found is None else found.pose)):  # fmt: skip
+        row[f"{name}_position_m"] = np.nan if pose is None else float(
+            np.hypot(*(pose[:2] - truth[:2])))  # fmt: skip
+        row[f"{name}_outline_m"] = np.nan if pose is None else outline_error(shape, pose, truth)
+    row["confidence"] = 0.0 if found is None else found.confidence
+    row["hypotheses"] = 0 if found is None else len(found.poses)
+    return row
