@@ -110,10 +110,11 @@ def test_outline_error_is_zero_for_symmetric_turns_and_the_shift_otherwise():
     pose = np.array([0.4, -0.2, 0.5])
     # A box turned by pi and a cylinder turned by anything cover the same outline; the 2.5 mm
     # tolerance is half the 5 mm outline sampling (samples need not map onto samples).
-    assert outline_error(BOX, pose, pose + [0.0, 0.0, np.pi]) < 0.0025
-    assert outline_error(CylinderSdf(0.04, 0.06), pose, pose + [0.0, 0.0, 1.0]) < 0.0025
+    assert outline_error(BOX, pose, pose + np.array([0.0, 0.0, np.pi])) < 0.0025
+    assert outline_error(CylinderSdf(0.04, 0.06), pose, pose + np.array([0.0, 0.0, 1.0])) < 0.0025
     # Shifted by 3 cm, every outline point is 3 cm from its old place and at least
     # 3 cm minus a half sample from the nearest old outline point on the leading faces.
-    assert outline_error(BOX, pose, pose + [0.03, 0.0, 0.0]) == pytest.approx(0.03, abs=0.0025)
+    assert outline_error(BOX, pose, pose + np.array([0.03, 0.0, 0.0])) == pytest.approx(0.03, abs=0.0025)
     # A quarter turn of a 16 x 8 cm box moves its far corners by (8 - 4) cm along each axis.
-    assert outline_error(BOX, pose, pose + [0.0, 0.0, np.pi / 2]) == pytest.approx(0.04, abs=0.0025)
+    quarter = pose + np.array([0.0, 0.0, np.pi / 2])
+    assert outline_error(BOX, pose, quarter) == pytest.approx(0.04, abs=0.0025)
