@@ -114,7 +114,8 @@ def test_outline_error_is_zero_for_symmetric_turns_and_the_shift_otherwise():
     assert outline_error(CylinderSdf(0.04, 0.06), pose, pose + np.array([0.0, 0.0, 1.0])) < 0.0025
     # Shifted by 3 cm, every outline point is 3 cm from its old place and at least
     # 3 cm minus a half sample from the nearest old outline point on the leading faces.
-    assert outline_error(BOX, pose, pose + np.array([0.03, 0.0, 0.0])) == pytest.approx(0.03, abs=0.0025)
+    shifted = pose + np.array([0.03, 0.0, 0.0])
+    assert outline_error(BOX, pose, shifted) == pytest.approx(0.03, abs=0.0025)
     # A quarter turn of a 16 x 8 cm box moves its far corners by (8 - 4) cm along each axis.
     quarter = pose + np.array([0.0, 0.0, np.pi / 2])
     assert outline_error(BOX, pose, quarter) == pytest.approx(0.04, abs=0.0025)
