@@ -362,7 +362,7 @@ def build_bor_diagram(
         "target_pose_estimator", TargetPoseEstimator(shape, penetration, icp_seed, h)
     )
     builder.Connect(assembler.GetOutputPort("ee_pose"), target.GetInputPort("ee_pose"))
-    for name in ("map_points", "segment_labels", "tracked_action"):
+    for name in ("map_points", "segment_labels", "tracked_action", "point_spread"):
         builder.Connect(tracking.GetOutputPort(name), target.GetInputPort(name))
 
     if meshcat is not None:
@@ -375,6 +375,7 @@ def build_bor_diagram(
 
     for system, name in ((tracking, "map_points"), (tracking, "segment_labels"),
                          (target, "target_pose"), (target, "estimate"),
+                         (target, "pose_hypotheses"), (target, "target_confidence"),
                          (assembler, "action_contacts"), (assembler, "action_truth"),
                          (detector, "in_contact")):  # fmt: skip
         builder.ExportOutput(system.GetOutputPort(name), name)

@@ -12,6 +12,7 @@ from pydrake.systems.framework import LeafSystem
 
 from stucco_drake.core.contact_motion import DX_MODELS, contact_motion
 from stucco_drake.core.observation import ActionContacts
+from stucco_drake.core.pose_hypotheses import point_spread
 from stucco_drake.core.tracker import Tracker
 
 
@@ -59,6 +60,8 @@ class SoftTrackingFilter(LeafSystem):
         segment_labels: (n,) numpy int array, object labels of those points (Algorithm 3).
         tracked_action: the :class:`ActionContacts` of the last update taken; systems that
             read the outputs after each update (the target-pose estimator) key on it.
+        point_spread: (n,) numpy array, each tracked point's weighted RMS distance (m) from
+            its mean over the tracker's particles; zeros for a tracker without particles.
 
     The check is a periodic unrestricted-update event (every ``check_period`` s, typically the
     plant's time step), so the update happens on the action clock without any side effect in
@@ -109,6 +112,9 @@ class SoftTrackingFilter(LeafSystem):
         self.DeclareAbstractOutputPort(
             "tracked_action", lambda: AbstractValue.Make(ActionContacts()), self._calc_action
         )
+        self.DeclareAbstractOutputPort(
+            "point_spread", lambda: AbstractValue.Make(np.zeros(0)), self._calc_point_spread
+        )
         self.DeclarePeriodicUnrestrictedUpdateEvent(check_period, 0.0, self._on_step)
 
     def tracking_state(self, context) -> TrackingState:
@@ -145,3 +151,10 @@ class SoftTrackingFilter(LeafSystem):
 
     def _calc_action(self, context, output):
         output.set_value(self.tracking_state(context).last_action)
+
+    def _calc_point_spread(self, context, output):
+        tracker = self.tracking_state(context).tracker
+        if tracker.n_contacts and hasattr(tracker, "points") and hasattr(tracker, "log_weights"):
+            output.set_value(point_spread(tracker.points, tracker.log_weights))
+        else:
+            output.set_value(np.zeros(tracker.n_contacts))

@@ -8,10 +8,11 @@ import dataclasses
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.pose_hypotheses import FreeSpace, HypothesisParams, pose_hypotheses
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.target_pose import (
     TOUCH_TOLERANCE,
@@ -63,12 +64,22 @@ class TargetPoseEstimator(LeafSystem):
             SoftTrackingFilter's ``tracked_action``, so the estimate sees the updated points).
         map_points: (n, 3) numpy array of tracked points (m, world).
         segment_labels: (n,) numpy int array.
+        point_spread: (n,) numpy array, each point's spread over the tracker's particles (m;
+            the SoftTrackingFilter's ``point_spread``); optional, none when unconnected.
 
     Output ports:
         target_pose: RigidTransform X_WO of the estimated target frame (yaw about world z, at
             the mean contact height); identity until a first estimate exists.
         estimate: the full :class:`TargetPoseEstimate` (None until a first estimate exists),
             with the per-segment report.
+        pose_hypotheses: weighted hypotheses of the target's pose from the tracked points,
+            their spread, the free space of the configs visited and the target's outline
+            (:func:`~stucco_drake.core.pose_hypotheses.pose_hypotheses`, a generator seeded by
+            ``[seed, action index]``); None while no segment has enough points. Computed only
+            when evaluated.
+        target_confidence: 1-vector, the hypotheses' confidence (0 to 1): the posterior
+            probability that a grasp at their chosen pose closes on the target; 0 without
+            hypotheses.
 
     Args:
         target_shape: the target's known geometry in its own frame (``BoxSdf``/``CylinderSdf``).
@@ -84,6 +95,7 @@ class TargetPoseEstimator(LeafSystem):
         touch_tolerance: per-pair penetration (m) forgiven at the configs before that window
             at which the chosen segment was touched (default 1 cm: how far the target may
             have moved since); None leaves them out.
+        hypothesis_params: settings of the pose hypotheses (default: HypothesisParams()).
     """
 
     def __init__(
@@ -95,6 +107,7 @@ class TargetPoseEstimator(LeafSystem):
         n_restarts: int = 30,
         penetration_configs: str | int = "since_touch",
         touch_tolerance: float | None = TOUCH_TOLERANCE,
+        hypothesis_params: HypothesisParams | None = None,
     ):
         super().__init__()
         if not check_period > 0:
@@ -106,6 +119,8 @@ class TargetPoseEstimator(LeafSystem):
         self.n_restarts = int(n_restarts)
         self.penetration_configs = penetration_configs
         self.touch_tolerance = touch_tolerance
+        self.hypothesis_params = hypothesis_params or HypothesisParams()
+        self._seed = int(seed)
         self._ee_pose = self.DeclareAbstractInputPort(
             "ee_pose", AbstractValue.Make(RigidTransform())
         )
@@ -118,6 +133,9 @@ class TargetPoseEstimator(LeafSystem):
         self._labels = self.DeclareAbstractInputPort(
             "segment_labels", AbstractValue.Make(np.zeros(0, dtype=np.int64))
         )
+        self._spread = self.DeclareAbstractInputPort(
+            "point_spread", AbstractValue.Make(np.zeros(0))
+        )
         initial = EstimatorState(np.random.default_rng(seed), np.zeros((0, 3)))
         self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
         self.DeclareAbstractOutputPort(
@@ -126,6 +144,18 @@ class TargetPoseEstimator(LeafSystem):
         self.DeclareAbstractOutputPort(
             "estimate", lambda: AbstractValue.Make(None), self._calc_estimate
         )
+        # Costly and needed only by who asks (a stopping rule, a viewer): computed once per
+        # context, when first evaluated, and shared by both ports.
+        self._hypotheses = self.DeclareCacheEntry(
+            "pose hypotheses", ValueProducer(
+                allocate=lambda: AbstractValue.Make(None), calc=self._calc_pose_hypotheses))
+        self.DeclareAbstractOutputPort(
+            "pose_hypotheses", lambda: AbstractValue.Make(None),
+            lambda c, o: o.set_value(self._hypotheses.Eval(c)),
+            prerequisites_of_calc={self._hypotheses.ticket()})  # fmt: skip
+        self.DeclareVectorOutputPort(
+            "target_confidence", 1, self._calc_target_confidence,
+            prerequisites_of_calc={self._hypotheses.ticket()})  # fmt: skip
         self.DeclarePeriodicUnrestrictedUpdateEvent(check_period, 0.0, self._on_step)
 
     def estimator_state(self, context) -> EstimatorState:
@@ -176,3 +206,26 @@ class TargetPoseEstimator(LeafSystem):
 
     def _calc_estimate(self, context, output):
         output.set_value(self.estimator_state(context).estimate)
+
+    def _calc_pose_hypotheses(self, context, output):
+        state = self.estimator_state(context)
+        points = self._points.Eval(context)
+        labels = np.asarray(self._labels.Eval(context))
+        # Points sensed after the last completed action's bookkeeping have no config yet.
+        n = min(len(points), len(state.point_steps))
+        counts = np.bincount(labels[:n][labels[:n] >= 0], minlength=1)
+        if n == 0 or counts.max() < self.hypothesis_params.min_explained:
+            output.set_value(None)
+            return
+        spread = self._spread.Eval(context) if self._spread.HasValue(context) else None
+        free = FreeSpace(self.penetration, state.config_positions,
+                         self._ee_pose.Eval(context).rotation().matrix(), state.point_steps[:n])
+        rng = np.random.default_rng([self._seed, max(state.last_action_index, 0)])
+        output.set_value(pose_hypotheses(
+            rng, points[:n], labels[:n], self.target_shape,
+            spread=None if spread is None else spread[:n], free_space=free,
+            params=self.hypothesis_params))  # fmt: skip
+
+    def _calc_target_confidence(self, context, output):
+        hypotheses = self._hypotheses.Eval(context)
+        output.SetFromVector([0.0 if hypotheses is None else hypotheses.confidence])
