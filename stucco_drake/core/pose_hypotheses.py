@@ -32,6 +32,7 @@ import dataclasses
 import itertools
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
 from stucco_drake.core.penetration import RobotPenetration
@@ -60,6 +61,11 @@ class HypothesisParams:
         outline_spacing: spacing of the outline points ICP fits.
         fill_spacing: spacing of the cross-section points checked against free space, and
             of the outline on which hypotheses are compared (closer ones count as one).
+        grid_spacing, grid_yaw: spacing (m, rad) of the grid of poses searched besides the
+            ICP proposals, over every placement that could touch a tracked point.
+        n_candidates: grid poses with the lowest contact cost kept as candidates.
+        n_polish: candidates (lowest full cost) refitted on the points each explains.
+        polish_iterations: refits of each (explain, fit, repeat).
     """
 
     contact_noise: float = 0.004
@@ -72,6 +78,11 @@ class HypothesisParams:
     n_restarts: int = 20
     outline_spacing: float = 0.002
     fill_spacing: float = 0.005
+    grid_spacing: float = 0.01
+    grid_yaw: float = np.radians(5.0)
+    n_candidates: int = 300
+    n_polish: int = 30
+    polish_iterations: int = 5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -140,21 +151,69 @@ def contact_costs(poses, points, sigma, shape, params: HypothesisParams):
     return np.minimum(on_surface, elsewhere).sum(axis=1), explained
 
 
-def free_space_costs(poses, explained, heights, free: FreeSpace | None, fill,
+def free_space_costs(poses, explained, height: float, free: FreeSpace | None, fill,
                      params: HypothesisParams) -> np.ndarray:  # fmt: skip
-    """(B,) free-space cost of each pose: its penetration into the robot at the configs since
-    the last action that sensed a point it explains (all configs when it explains none)."""
+    """(B,) free-space cost of each pose, its cross-section ``fill`` posed at ``height`` (m):
+    its penetration into the robot at the configs since the last action that sensed a point
+    it explains (all configs when it explains none). Poses sharing that action go in one
+    batch."""
     costs = np.zeros(len(poses))
     if free is None or len(free.positions) == 0:
         return costs
-    for b, pose in enumerate(poses):
-        steps = free.point_steps[explained[b]]
-        first = int(steps.max()) if len(steps) else 0
-        depth = restart_penetration(free.penetration, pose[None], fill, heights[b],
+    firsts = np.array([int(free.point_steps[e].max()) if e.any() else 0 for e in explained])
+    for first in np.unique(firsts):
+        batch = firsts == first
+        depth = restart_penetration(free.penetration, poses[batch], fill, height,
                                     free.positions[first:], free.rotation,
                                     params.free_space_tolerance)  # fmt: skip
-        costs[b] = depth[0] / params.free_space_scale
+        costs[batch] = depth / params.free_space_scale
     return costs
+
+
+def grid_candidates(points, sigma, shape, params: HypothesisParams) -> np.ndarray:
+    """The ``n_candidates`` poses of lowest contact cost on a grid (``grid_spacing``,
+    ``grid_yaw``) of every placement whose outline could reach a tracked point: the search
+    that ICP's local fits on segments can miss (a segment holding clutter pulls them off)."""
+    reach = outline_extent(shape) / 2.0
+    lower, upper = points[:, :2].min(axis=0) - reach, points[:, :2].max(axis=0) + reach
+    axes = [np.arange(lo, hi + 1e-12, params.grid_spacing)
+            for lo, hi in zip(lower, upper, strict=True)]
+    if isinstance(shape, CylinderSdf) and np.allclose(shape.center[:2], 0.0):
+        yaws = np.zeros(1)  # a centred cylinder looks the same at every yaw
+    else:
+        # A centred box repeats after a half turn.
+        period = np.pi if np.allclose(shape.center[:2], 0.0) else 2.0 * np.pi
+        yaws = np.arange(0.0, period, params.grid_yaw)
+    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 2)
+    # A placement can explain a point only if the point lies within the outline's reach of
+    # its centre; one that cannot explain enough points to pin a pose is not searched.
+    nearby = cKDTree(points[:, :2]).query_ball_point(centres, reach + params.contact_noise,
+                                                     return_length=True)  # fmt: skip
+    centres = centres[nearby >= params.min_explained]
+    grid = np.column_stack([np.repeat(centres, len(yaws), axis=0),
+                            np.tile(yaws, len(centres))])  # fmt: skip
+    block = max(1, (1 << 21) // len(points))  # bounded memory: poses x points per block
+    costs = np.concatenate([contact_costs(grid[k:k + block], points, sigma, shape, params)[0]
+                            for k in range(0, len(grid), block)])  # fmt: skip
+    keep = min(params.n_candidates, len(grid))
+    return grid[np.argsort(costs, kind="stable")[:keep]]
+
+
+def _polish(rng, poses, points, sigma, shape, outline, params: HypothesisParams):
+    """Each pose refitted by ICP on the points it explains, explained again, up to
+    ``polish_iterations`` times (an EM of point assignment and pose)."""
+    polished = []
+    for pose in poses:
+        for _ in range(params.polish_iterations):
+            _, explained = contact_costs(pose[None], points, sigma, shape, params)
+            if explained[0].sum() < params.min_explained:
+                break
+            fitted = icp_2d(rng, points[explained[0], :2], outline, 1, initial_pose=pose)
+            if np.allclose(fitted.poses[0], pose, rtol=0.0, atol=1e-6):
+                break
+            pose = fitted.poses[0]
+        polished.append(pose)
+    return np.array(polished).reshape(-1, 3)
 
 
 def _proposal_groups(points, labels, reach: float, min_points: int) -> list[np.ndarray]:
@@ -170,21 +229,34 @@ def _proposal_groups(points, labels, reach: float, min_points: int) -> list[np.n
     return groups
 
 
-def _hausdorff(a, b) -> float:
-    """Symmetric Hausdorff distance (m) between point sets a (m, 2) and b (m', 2)."""
-    d = np.sqrt(np.sum((a[:, None] - b[None]) ** 2, axis=-1))
-    return float(max(d.min(axis=0).max(), d.min(axis=1).max()))
+def _outline_gaps(distance, outline, poses_a, poses_b) -> np.ndarray:
+    """(P,) largest distance (m) from the outline posed at each ``poses_b`` to the
+    cross-section posed at the matching ``poses_a`` (``distance`` its 2-D signed distance in its
+    own frame): for two poses of one shape, their outlines' Hausdorff distance up to the
+    outline's sampling when taken both ways."""
+    posed = transform(poses_b, outline)
+    local = np.einsum("pmi,pij->pmj", posed - poses_a[:, None, :2], rotations(poses_a[:, 2]))
+    return np.abs(distance(local)).max(axis=1)
 
 
-def _distinct(poses, outline, resolution: float) -> np.ndarray:
-    """``poses`` without near-duplicates: a pose whose posed outline lies within
-    ``resolution`` (m, Hausdorff) of an earlier kept one's is dropped (a box turned by pi, a
-    cylinder at any yaw)."""
-    posed = transform(poses, outline)
+def _agreement(distance, outline, poses_a, poses_b) -> np.ndarray:
+    """(P,) symmetric outline distance (m) of matching pose pairs (see :func:`_outline_gaps`)."""
+    return np.maximum(_outline_gaps(distance, outline, poses_a, poses_b),
+                      _outline_gaps(distance, outline, poses_b, poses_a))  # fmt: skip
+
+
+def _distinct(poses, shape, outline, resolution: float) -> np.ndarray:
+    """``poses`` without near-duplicates: a pose whose outline lies within ``resolution`` (m)
+    of an earlier kept one's (:func:`_outline_gap`) is dropped (a box turned by pi, a cylinder
+    at any yaw). Only poses whose outline centroids lie within ``resolution`` are compared."""
+    distance = cross_section_sdf(shape)
+    centres = transform(poses, outline).mean(axis=1)
     kept: list[int] = []
     for b in range(len(poses)):
-        near = (k for k in kept if np.hypot(*(posed[k].mean(0) - posed[b].mean(0))) <= resolution)
-        if not any(_hausdorff(posed[k], posed[b]) <= resolution for k in near):
+        near = [kept[k] for k in np.flatnonzero(
+            np.hypot(*(centres[kept] - centres[b]).T) <= resolution)] if kept else []
+        if not near or _agreement(distance, outline, poses[near],
+                                  np.repeat(poses[b:b + 1], len(near), axis=0)).min() > resolution:
             kept.append(b)
     return poses[kept]
 
@@ -219,22 +291,38 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     if not groups:
         raise ValueError(f"labels: no segment has at least {params.min_explained} points")
     outline = sample_outline(shape, params.outline_spacing)
-    fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
     # Hypotheses are compared on a coarser outline, and count as one within its spacing.
     coarse = sample_outline(shape, params.fill_spacing)
-    poses = _distinct(np.concatenate(fits), coarse, params.fill_spacing)
-    # Refit each on the points it explains (one EM step): clutter in its segment let go,
-    # points of the target in other segments taken in.
-    _, explained = contact_costs(poses, points, sigma, shape, params)
-    refit = [icp_2d(rng, points[e, :2], outline, 1, initial_pose=pose).poses[0]
-             if e.sum() >= params.min_explained else pose
-             for pose, e in zip(poses, explained, strict=True)]  # fmt: skip
-    poses = _distinct(np.concatenate([poses, refit]), coarse, params.fill_spacing)
-    contact, explained = contact_costs(poses, points, sigma, shape, params)
-    heights = np.array([points[e, 2].mean() if e.any() else points[:, 2].mean()
-                        for e in explained])  # fmt: skip
     fill = sample_cross_section(shape, params.fill_spacing)
-    costs = contact + free_space_costs(poses, explained, heights, free_space, fill, params)
+    height = float(points[:, 2].mean())
+    margin = 15.0 * params.temperature  # weights below e^-15 of the best's count as none
+
+    def scored(poses):
+        poses = _distinct(poses, shape, coarse, params.fill_spacing)
+        contact, explained = contact_costs(poses, points, sigma, shape, params)
+        # Free space only where it can matter: the best full cost is at most the cheapest
+        # contact pose's, and a pose whose contact cost alone exceeds that by the margin
+        # weighs nothing (cost inf).
+        costs = np.full(len(poses), np.inf)
+        first = np.argmin(contact)[None]
+        bound = contact[first] + free_space_costs(poses[first], explained[first], height,
+                                                  free_space, fill, params)  # fmt: skip
+        batch = np.flatnonzero(contact <= bound[0] + margin)
+        costs[batch] = contact[batch] + free_space_costs(
+            poses[batch], explained[batch], height, free_space, fill, params)
+        return poses, costs
+
+    fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
+    poses, costs = scored(np.concatenate([*fits, grid_candidates(points, sigma, shape, params)]))
+    best = poses[np.argsort(costs, kind="stable")[:params.n_polish]]
+    poses, costs = scored(np.concatenate([poses, _polish(rng, best, points, sigma, shape,
+                                                         outline, params)]))  # fmt: skip
+    # Hypotheses weighing under e^-15 of the best, or explaining too few points to pin a
+    # pose, carry no information: left out.
+    explained = contact_costs(poses, points, sigma, shape, params)[1]
+    keep = (costs <= costs.min() + margin) & (explained.sum(axis=1) >= params.min_explained)
+    keep |= costs == costs.min()
+    poses, costs, explained = poses[keep], costs[keep], explained[keep]
     order = np.argsort(costs, kind="stable")
     poses, costs, explained = poses[order], costs[order], explained[order]
     weights = np.exp(-(costs - costs[0]) / params.temperature)
@@ -242,15 +330,20 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     # The grasp is made at one pose; it closes on the target under every hypothesis whose
     # outline lies within the agreement of that pose's. Take the pose with the most weight so
     # covered (the cheapest among equals), not merely the cheapest.
-    posed = transform(poses, coarse)
+    distance = cross_section_sdf(shape)
+    centres = transform(poses, coarse).mean(axis=1)
     agree = np.eye(len(poses), dtype=bool)
-    centres = posed.mean(axis=1)
-    for a, b in itertools.combinations(range(len(poses)), 2):
-        # Outlines whose centroids lie farther apart than twice the agreement cannot agree.
-        if np.hypot(*(centres[a] - centres[b])) <= 2.0 * params.agreement:
-            agree[a, b] = agree[b, a] = _hausdorff(posed[a], posed[b]) <= params.agreement
+    # Outlines whose centroids lie farther apart than the agreement cannot agree.
+    close = np.hypot(*(centres[:, None] - centres[None]).transpose(2, 0, 1)) <= params.agreement
+    first, second = np.nonzero(np.triu(close, 1))
+    agree[first, second] = _agreement(distance, coarse, poses[first], poses[second]) \
+        <= params.agreement
+    agree |= agree.T
     covered = agree.astype(np.float64) @ weights
-    chosen = int(np.argmax(np.round(covered, 12)))
+    # The grasp is at the cheapest pose of the group most weight agrees with: the group's
+    # centre of weight may lie between hypotheses.
+    group = np.flatnonzero(agree[int(np.argmax(np.round(covered, 12)))])
+    chosen = int(group[np.argmin(costs[group])])
     confidence = float(covered[chosen])
     if explained[chosen].sum() < params.min_explained:
         confidence = 0.0
