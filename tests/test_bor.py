@@ -132,8 +132,24 @@ def short_fb():
     return bor, simulator, snapshot, result
 
 
+def drake_contact_error_cm(bor, context, points) -> float:
+    """CE (cm) from Drake's own geometry: per point, the smallest |signed distance| SceneGraph
+    gives to any object's collision geometry (not the robot's, not the table's), averaged."""
+    plant, scene_graph = bor.scene.plant, bor.scene.scene_graph
+    query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))
+    inspector = query.inspector()
+    objects = {b.index() for n, b in {**bor.scene.free_bodies, **bor.scene.welded_bodies}.items()
+               if n != "table"}  # fmt: skip
+    nearest = []
+    for point in points:
+        found = [abs(d.distance) for d in query.ComputeSignedDistanceToPoint(point, 1.0)
+                 if plant.GetBodyFromFrameId(inspector.GetFrameId(d.id_G)).index() in objects]
+        nearest.append(min(found))
+    return 100.0 * float(np.mean(nearest))
+
+
 def test_short_fb_tracks_contacts_and_scores(short_fb):
-    _, _, _, result = short_fb
+    bor, simulator, _, result = short_fb
     print("\n" + result.summary())
     print("contacts per action", result.contacts_per_action.tolist(),
           "isolation errors (cm)", np.round(result.isolation_errors * 100, 2).tolist())
@@ -141,9 +157,20 @@ def test_short_fb_tracks_contacts_and_scores(short_fb):
     # The first actions move the gripper towards the cracker box and then along it.
     assert len(result.map_points) >= 3
     assert result.map_points.shape == (result.contacts_per_action.sum(), 3)
-    assert np.isfinite(result.ce_cm) and result.ce_cm < 5.0
-    assert 0.0 <= result.fmi <= 1.0
-    assert "target" in set(result.truth_labels)
+    # The CE the episode reports is the one Drake's geometry gives for the same points (both
+    # exact for these boxes and cylinders: the tolerance, 10 nm, is round-off).
+    drake_ce = drake_contact_error_cm(bor, simulator.get_context(), result.map_points)
+    assert result.ce_cm == pytest.approx(drake_ce, abs=1e-6)
+    # Measured: 0.17 cm (6 points, all within 5 mm of the box). The paper's STUCCO CE on FB is
+    # 0.72 cm, std 0.25, over the whole 54-action run (Table II); these first actions only
+    # push the 10 kg box, so 1 cm, about its mean plus one std, is a bound a correct run meets
+    # with room and a point left 2 cm off its object's surface breaks.
+    assert result.ce_cm <= 1.0
+    # Every contact Drake reports for these actions is on the box, and STUCCO's segmentation
+    # radius (13.5 cm) spans the 6 cm of box face they cover: one segment, FMI exactly 1.
+    known = result.truth_labels != ""
+    assert known.sum() >= 3 and set(result.truth_labels[known]) == {"target"}
+    assert result.fmi == 1.0
     assert result.grasp is None and result.grasp_success is None
 
 

@@ -67,11 +67,24 @@ def test_same_seed_same_log():
 
 def test_every_method_replays_a_drake_log(fb_log):
     penetration = log_penetration(fb_log)
+    rows = {}
     for method in TRACKER_NAMES:
         row = replay(fb_log, method, penetration=penetration if method == "stucco" else None)
+        rows[method] = row
         assert row["n_contacts"] == fb_log.n_contacts, method
-        assert 0.0 <= row["ce_cm"] < 5.0, row
         assert 0.0 < row["fmi"] <= 1.0, row
+    print("\nCE by method (cm):", {m: round(r["ce_cm"], 2) for m, r in rows.items()})
+    # Measured: STUCCO, BIRCH and k-means 0.12 cm, GM-PHD 0.33, DBSCAN 0.77 (it splits the box's
+    # points in two and moves one part with the other's displacement). These 8 actions touch
+    # only the 10 kg target, which turns 2 degrees and moves 1 mm, so no method has a reason to
+    # carry points off it. 1 cm is the paper's STUCCO CE on FB (0.72 cm, std 0.25, Table II:
+    # mean plus one std, rounded up); points moved 2 cm off the box break it.
+    for row in rows.values():
+        assert row["ce_cm"] <= 1.0, row
+    # Every labelled contact is on the box, whose touched face the points cover over 8.5 cm,
+    # inside STUCCO's segmentation radius (13.5 cm): one segment.
+    assert set(fb_log.contact_object[fb_log.contact_object >= 0]) == {0}
+    assert rows["stucco"]["fmi"] == 1.0
 
 
 class _TrueOutline:

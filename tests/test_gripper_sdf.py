@@ -3,6 +3,9 @@
 Grids here are coarse (4-5 mm) so that the whole file runs in a few seconds.
 """
 
+import re
+import shutil
+
 import numpy as np
 import pytest
 from pydrake.geometry import Ellipsoid
@@ -11,6 +14,7 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, CoulombFriction
 from pydrake.multibody.tree import SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
+import stucco_drake.gripper_sdf as gripper_sdf
 from stucco_drake.core import GridSdf, RobotPenetration
 from stucco_drake.gripper_sdf import (
     GripperDistance,
@@ -21,6 +25,7 @@ from stucco_drake.gripper_sdf import (
     gripper_model_hash,
     gripper_penetration,
 )
+from stucco_drake.models import MODELS_DIR
 
 RESOLUTION = 0.004
 BAND = max(0.005, 3 * RESOLUTION)  # gripper_grid_sdf's default band at this resolution
@@ -143,8 +148,39 @@ def test_model_files_follow_includes_and_meshes(tmp_path):
     assert [f.name for f in files] == ["top.sdf", "part.urdf", "shell.obj"]
 
 
-def test_model_hash_and_opening_checks():
-    assert len(gripper_model_hash()) == 64 and gripper_model_hash() == gripper_model_hash()
+def test_model_hash_follows_the_model_bytes_not_their_location(tmp_path, monkeypatch):
+    """The grid cache's key holds this hash, so it must change with any byte of the gripper's
+    model or of a file the model includes, and only with those: not with where the files lie
+    (a clone elsewhere shares the cache) nor with model files the gripper does not use."""
+    original = gripper_model_hash()
+    assert re.fullmatch("[0-9a-f]{64}", original)  # a SHA-256 in hex
+    copy = tmp_path / "models"
+    shutil.copytree(MODELS_DIR, copy)
+    monkeypatch.setattr(gripper_sdf, "MODELS_DIR", copy)
+    assert gripper_model_hash() == original  # the same bytes elsewhere
+    model = copy / "bubble_gripper" / "bubble_gripper.sdf"
+    text = model.read_text()
+    radii = "<radii>0.02 0.04 0.055</radii>"
+    assert text.count(radii) == 4  # the four bubble halves
+    model.write_text(text.replace(radii, "<radii>0.021 0.04 0.055</radii>", 1))  # 1 mm thicker
+    edited = gripper_model_hash()
+    assert edited != original
+    assert f"model={edited} " in GripperDistance().description()  # what keys the grid cache
+    # A file the model includes counts as the model: change only it and the hash changes.
+    part = copy / "bubble_gripper" / "part.sdf"
+    part.write_text('<sdf version="1.9"><model name="part"/></sdf>')
+    model.write_text(text.replace("</sdf>", "<include><uri>part.sdf</uri></include></sdf>"))
+    with_part = gripper_model_hash()
+    assert with_part != original
+    part.write_text('<sdf version="1.9"><model name="part2"/></sdf>')
+    assert gripper_model_hash() not in (with_part, original)
+    # Back to the original bytes: the original hash, whatever other model files say.
+    model.write_text(text)
+    (copy / "table.sdf").write_text((copy / "table.sdf").read_text() + "<!-- edited -->\n")
+    assert gripper_model_hash() == original
+
+
+def test_opening_outside_the_finger_limits_is_refused():
     with pytest.raises(ValueError, match="outside"):
         GripperDistance(0.06)  # beyond the finger joints' 0.055 m limit
 

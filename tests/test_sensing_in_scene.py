@@ -10,7 +10,8 @@ Two small scenes, one simulation each (module fixtures), scene step 2 ms, 0.5 s 
 * ``closed``: fingers closed (finger_position 0, held by the joint controller as in the BOR
   scenes). Single-patch pushes: a 3 cm cylinder pushed with the gripper's side, its axis in
   front of one finger plate only, so it touches that plate alone. Two-patch pushes: a box face
-  pushed with the same side, which the two finger plates touch at once (the FB case).
+  pushed with the same side, which the two finger plates touch at once (the FB case; both
+  bear load only while the box slides, it rests on one plate's edge in steady contact).
   Plate-face pushes: a box pushed with a finger plate's outer face, whose line of action also
   enters the other finger's bubble (the CPF's ambiguous case).
 * ``open``: fingers at 0.03 m, locked (the estimator takes them as rigid; held only by the
@@ -110,7 +111,9 @@ class GripperObjectContacts(LeafSystem):
 
     Output ``truth``: [F (3): total force the objects apply to the gripper's bodies (N, world);
     number of gripper-object contacts; 1.0 if an arm link touches an object; centroids of the
-    ``MAX_PATCHES`` strongest contacts (3 each, m, world; NaN when fewer)].
+    ``MAX_PATCHES`` strongest contacts (3 each, m, world; NaN when fewer); τ (3): the total
+    moment of those forces about the world origin (N·m, world); force magnitudes of the
+    ``MAX_PATCHES`` strongest contacts (N; NaN when fewer)].
     """
 
     def __init__(self, built):
@@ -129,7 +132,7 @@ class GripperObjectContacts(LeafSystem):
         self._results = self.DeclareAbstractInputPort(
             "contact_results", AbstractValue.Make(ContactResults())
         )
-        self.DeclareVectorOutputPort("truth", 5 + 3 * MAX_PATCHES, self._calc)
+        self.DeclareVectorOutputPort("truth", 8 + 4 * MAX_PATCHES, self._calc)
 
     def _calc(self, context, output):
         results = self._results.Eval(context)
@@ -138,28 +141,33 @@ class GripperObjectContacts(LeafSystem):
         for i in range(results.num_hydroelastic_contacts()):
             info = results.hydroelastic_contact_info(i)
             surface = info.contact_surface()
-            # F_Ac_W acts on the body of geometry M.
+            # F_Ac_W acts on the body of geometry M, at the centroid C, with a moment there.
             pairs.append((surface.id_M(), surface.id_N(), info.F_Ac_W().translational(),
-                          np.array(surface.centroid())))  # fmt: skip
+                          np.array(surface.centroid()), info.F_Ac_W().rotational()))  # fmt: skip
         for i in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(i)
             # contact_force() acts on body B.
             pairs.append((info.point_pair().id_B, info.point_pair().id_A, info.contact_force(),
-                          np.array(info.contact_point())))  # fmt: skip
-        for on, other, force, point in pairs:
+                          np.array(info.contact_point()), np.zeros(3)))  # fmt: skip
+        torque = np.zeros(3)
+        for on, other, force, point, moment in pairs:
             kinds = (self._kind.get(on), self._kind.get(other))
             if sorted(kinds) == ["arm", "object"]:
                 arm = 1.0
             if sorted(kinds) != ["gripper", "object"]:
                 continue
-            f_gripper = force if kinds[0] == "gripper" else -force
+            sign = 1.0 if kinds[0] == "gripper" else -1.0
+            f_gripper = sign * force
             total += f_gripper
+            torque += np.cross(point, f_gripper) + sign * moment
             found.append((np.linalg.norm(f_gripper), point))
         found.sort(key=lambda item: -item[0])
-        out = np.full(5 + 3 * MAX_PATCHES, np.nan)
+        out = np.full(8 + 4 * MAX_PATCHES, np.nan)
         out[:3], out[3], out[4] = total, len(found), arm
-        for k, (_, point) in enumerate(found[:MAX_PATCHES]):
+        for k, (norm, point) in enumerate(found[:MAX_PATCHES]):
             out[5 + 3 * k : 8 + 3 * k] = point
+            out[8 + 3 * MAX_PATCHES + k] = norm
+        out[5 + 3 * MAX_PATCHES : 8 + 3 * MAX_PATCHES] = torque
         output.SetFromVector(out)
 
 
@@ -240,7 +248,9 @@ def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     out["F"], out["n_patches"], out["arm_contact"] = (
         truth_log[:, :3], truth_log[:, 3], truth_log[:, 4]
     )
-    out["patches"] = truth_log[:, 5:].reshape(-1, MAX_PATCHES, 3)
+    out["patches"] = truth_log[:, 5 : 5 + 3 * MAX_PATCHES].reshape(-1, MAX_PATCHES, 3)
+    out["torque"] = truth_log[:, 5 + 3 * MAX_PATCHES : 8 + 3 * MAX_PATCHES]
+    out["patch_force"] = truth_log[:, 8 + 3 * MAX_PATCHES :]
     out["action_of_step"] = np.round(out["action"][:, 0]).astype(int)
     return out
 
@@ -411,26 +421,63 @@ def test_ambiguity_flag_in_scene(closed_run, open_run):
           f"{1e3 * np.median(error[~flagged]) if (~flagged).any() else np.nan:.1f} mm)")
 
 
-def test_two_patch_pushes_are_measured(closed_run):
-    """The FB case: a box face against both finger plates. The single-contact CPF cannot be
-    right about two patches; this records how far off it is (no bar from the issue)."""
+def observed_truth(run, lag: int = 2):
+    """The true contact force and moment (about the world origin) as the wrench observer should
+    report them: through its documented response r[n+1] = (1 - K h) r[n] + K h τ_ext[n]
+    (:class:`ExternalWrenchEstimator`, K = GAIN), ``lag`` steps behind the logged contact
+    results, which the logger reads before the observer has seen the momentum they change
+    (two steps is the lag that matches: see the force check where it is used)."""
+    a = GAIN * (run["t"][1] - run["t"][0])
+    truth = np.hstack([run["F"], run["torque"]])
+    seen = np.zeros_like(truth)
+    for n in range(1, len(truth)):
+        seen[n] = (1 - a) * seen[n - 1] + a * truth[max(n - lag, 0)]
+    return seen[:, :3], seen[:, 3:]
+
+
+def distance_to_line_of_action(points, force, torque) -> np.ndarray:
+    """Per step, distance (m) from the point to the central axis of the wrench (force, torque
+    about the world origin): the line a single contact force must act along to give it."""
+    unit = force / np.linalg.norm(force, axis=1, keepdims=True)
+    on_line = np.cross(force, torque) / np.sum(force * force, axis=1, keepdims=True)
+    offset = points - on_line
+    return np.linalg.norm(offset - np.sum(offset * unit, axis=1, keepdims=True) * unit, axis=1)
+
+
+def test_two_patch_pushes_put_the_cpf_point_on_the_true_line_of_action(closed_run):
+    """The FB case: a box face against both finger plates. A single-contact CPF cannot be at
+    two patches; what the hard-finger model can get right is the line of action of the total
+    contact wrench, which for two patches of one face runs between them. The truth is Drake's:
+    the contact results' forces and moments, as the observer sees them."""
     run = closed_run
-    # The box chatters against the plates while sliding: every contact step counts here.
-    m = in_actions(run, TWO_PATCH) & (force_norm(run) >= CONTACT_FORCE)
+    force, torque = observed_truth(run)
+    m = in_actions(run, TWO_PATCH) & (np.linalg.norm(force, axis=1) >= 2.0)
+    m &= run["cpf", "has_contact"][:, 0] > 0.5
     m &= run["cpf", "contact_source"][:, 0] == SOURCE_CPF
-    two = run["n_patches"][m] >= 2
-    assert two.sum() >= 100  # the scenario is what it claims
-    error = nearest_patch_error(run["cpf", "contact_point"][m], run["patches"][m])
-    # The distance to the farthest of the two strongest patches: how wrong the single point is
-    # about the contact as a whole.
-    farthest = np.linalg.norm(run["cpf", "contact_point"][m][:, None] - run["patches"][m][:, :2],
-                              axis=2).max(axis=1)  # fmt: skip
-    flagged = run["cpf", "contact_ambiguous"][m, 0]
+    # The truth's timing is the observer's: its force matches the filtered truth. Measured:
+    # median 0.6 % here (5 % with a lag of one step less or more, so the lag is not a guess).
+    relative = np.linalg.norm(run["wrench"][m, 3:] - force[m], axis=1)
+    relative /= np.linalg.norm(force[m], axis=1)
+    assert np.median(relative) <= 0.02
+    # Steps where both plates bear load: the weaker of the two strongest contacts (measured: on
+    # the other plate, 5.7-6.6 cm away) carries at least a tenth of their force. The box bears
+    # on one plate's edge most of the time (it chatters as it slides): measured 32 of 450
+    # steps, none in settled contact.
+    strongest = np.nan_to_num(run["patch_force"][m, :2])
+    two = (strongest[:, 1] > 0) & (strongest[:, 1] >= 0.1 * strongest.sum(axis=1))
+    assert two.sum() >= 20
+    point = run["cpf", "contact_point"][m]
+    off_line = distance_to_line_of_action(point, force[m], torque[m])
+    error = nearest_patch_error(point, run["patches"][m])
     print(
-        f"two-patch actions: {m.sum()} contact steps, {two.sum()} with >= 2 patches; on those, "
-        f"error to the nearest patch median {1e3 * np.median(error[two]):.1f} mm, 90th pct "
-        f"{1e3 * np.quantile(error[two], 0.9):.1f} mm, to the farther of the two strongest "
-        f"median {1e3 * np.median(farthest[two]):.1f} mm; one-patch steps: median "
-        f"{1e3 * np.median(error[~two]):.1f} mm, 90th pct "
-        f"{1e3 * np.quantile(error[~two], 0.9):.1f} mm; ambiguous {flagged.mean():.2f}"
+        f"two-patch actions: {m.sum()} CPF steps, {two.sum()} with both plates loaded; "
+        f"distance to the line of action median {1e3 * np.median(off_line[two]):.1f} mm, 90th "
+        f"pct {1e3 * np.quantile(off_line[two], 0.9):.1f} mm (one plate loaded: median "
+        f"{1e3 * np.median(off_line[~two]):.1f} mm); to the nearest patch median "
+        f"{1e3 * np.median(error[two]):.1f} mm"
     )
+    # Measured: median 5.9 mm, 90th pct 13.9 mm on the two-plate steps (one plate: 1.9 mm).
+    # The bar is the single-patch CPF's in this file (median 1 cm). It tells the line from the
+    # patches: the stronger patch's centroid is 19 mm from it (median; the weaker one carries
+    # 14-42 % of the force), the weaker one's 43 mm.
+    assert np.median(off_line[two]) <= 0.010
