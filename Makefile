@@ -26,11 +26,13 @@ system-deps:
 test: $(STAMP) system-deps
 	$(BIN)/python -m pytest -q
 
-# Blind Object Retrieval on scene FB end to end: rummage, track, estimate, grasp; writes a
-# standalone Meshcat recording and a plot of the tracked points under out/.
+# Blind Object Retrieval on scene FB end to end at Table II's setting (contact motion, STUCCO's
+# parameters): rummage, track, estimate, grasp; writes a standalone Meshcat recording and a
+# plot of the tracked points under out/.
 demo: $(STAMP)
 	mkdir -p out
-	$(BIN)/stucco-drake run --scene FB --method stucco --seed 0 --record out/fb.html --plot out/fb.png
+	$(BIN)/stucco-drake run --scene FB --method stucco --seed 0 --dx-model cone \
+	    --stucco-params results/table_ii/stucco.yaml --record out/fb.html --plot out/fb.png
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

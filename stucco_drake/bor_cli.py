@@ -120,13 +120,20 @@ def _outline(surface, n: int = 64) -> np.ndarray:
 
 def plot_episode(result, path: str | Path) -> None:
     """Top view: true object outlines at their final poses (grey; the target black), tracked
-    points coloured by segment, and the estimated target outline (blue, dashed)."""
+    points in their segment's colour (the recording's), and the estimated target outline
+    (magenta, dashed, as in the recording); the title gives how far the estimate is off."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from stucco_drake.bor import PosedSurface
+    from stucco_drake.systems.contact_tracking_visualizer import (
+        OUTLINE_COLOR,
+        SEGMENT_PALETTE,
+        UNLABELLED_COLOR,
+        segment_color_index,
+    )
 
     fig, ax = plt.subplots(figsize=(6, 6))
     for name, group in result.surfaces.items():
@@ -135,15 +142,19 @@ def plot_episode(result, path: str | Path) -> None:
             xy = _outline(surface)
             ax.plot(xy[:, 0], xy[:, 1], color="k" if target else "0.6", lw=1.5 if target else 1)
     points, labels = result.map_points, np.asarray(result.labels)
-    if len(points):
-        ax.scatter(points[:, 0], points[:, 1], c=labels, cmap="tab10", marker="x", s=30,
-                   vmin=0, vmax=9, label="tracked contacts")  # fmt: skip
+    for label in np.unique(labels):
+        index = segment_color_index(label)
+        color = (UNLABELLED_COLOR if index < 0 else SEGMENT_PALETTE[index]).rgba[:3]
+        mine = points[labels == label]
+        ax.scatter(mine[:, 0], mine[:, 1], color=color, marker="o", s=36, edgecolors="k",
+                   linewidths=0.5, label=f"segment {label}" if label >= 0 else "unlabelled")
     if result.estimate is not None and result.target_shape is not None:
         e = result.estimate
         c, s = np.cos(e.yaw), np.sin(e.yaw)
         X_WO = np.array([[c, -s, 0, e.x], [s, c, 0, e.y], [0, 0, 1, 0], [0, 0, 0, 1.0]])
         xy = _outline(PosedSurface(result.target_shape, np.linalg.inv(X_WO)))
-        ax.plot(xy[:, 0], xy[:, 1], "b--", lw=1.5, label="estimated target")
+        ax.plot(xy[:, 0], xy[:, 1], "--", color=OUTLINE_COLOR.rgba[:3], lw=1.5,
+                label="estimated target")  # fmt: skip
     # Frame the clutter (free objects and tracked points), not the walls around it.
     near = [xy[:2] for xy in result.object_poses.values()] + [p[:2] for p in points]
     low, high = np.min(near, axis=0) - 0.12, np.max(near, axis=0) + 0.12
@@ -152,8 +163,10 @@ def plot_episode(result, path: str | Path) -> None:
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
+    grasp = "" if result.grasp_success is None else (
+        ", grasped" if result.grasp_success else ", grasp failed")
     ax.set_title(f"{result.scene} {result.method} seed {result.seed}: CE {result.ce_cm:.2f} cm, "
-                 f"FMI {result.fmi:.2f}")  # fmt: skip
+                 f"FMI {result.fmi:.2f}\n{result.estimate_words()}{grasp}")  # fmt: skip
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)

@@ -13,7 +13,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from stucco_drake.bor import BorDiagram, build_bor_diagram, object_surfaces
-from stucco_drake.core.metrics import contact_error, fowlkes_mallows
+from stucco_drake.core.metrics import contact_error, fowlkes_mallows, target_pose_error
 from stucco_drake.scenes import SceneFile, load_scene
 from stucco_drake.scenes.builder import yaw_of
 
@@ -109,15 +109,37 @@ class EpisodeResult:
     wall_time_s: float
     sim_time_s: float
 
+    def estimate_error(self) -> tuple[float, float] | None:
+        """(position error in cm, yaw error in deg) of the target pose estimate against the
+        target's true final pose, the yaw modulo the target's symmetry (NaN for a cylinder;
+        see :func:`~stucco_drake.core.metrics.target_pose_error`); None without an estimate."""
+        if self.estimate is None:
+            return None
+        distance, yaw = target_pose_error(self.estimate.pose, self.target_pose_true,
+                                          self.target_shape)  # fmt: skip
+        return 100.0 * distance, float(np.degrees(yaw))
+
+    def estimate_words(self) -> str:
+        """How far the target pose estimate is from the truth, in words (see
+        :meth:`estimate_error`)."""
+        error = self.estimate_error()
+        if error is None:
+            return "no target estimate"
+        if np.isnan(error[1]):  # a cylinder: every yaw is the same pose
+            return f"target estimate {error[0]:.2f} cm off"
+        return f"target estimate {error[0]:.2f} cm and {error[1]:.1f} deg off"
+
     def summary(self) -> str:
-        """One line: grasp success (or n/a), CE, FMI, contacts and wall time."""
+        """One line: grasp success (or n/a), CE, FMI, how far the target pose estimate is from
+        the truth, contacts and wall time."""
         gs = "n/a" if self.grasp_success is None else ("yes" if self.grasp_success else "no")
         iso = np.nanmedian(self.isolation_errors) * 100 if np.isfinite(
             self.isolation_errors).any() else float("nan")  # fmt: skip
         return (
             f"{self.scene} {self.method} seed {self.seed}: GS {gs}, CE {self.ce_cm:.2f} cm, "
-            f"FMI {self.fmi:.3f}, {len(self.map_points)} contacts in {self.n_actions} actions "
-            f"(median isolation error {iso:.2f} cm), wall {self.wall_time_s:.1f} s"
+            f"FMI {self.fmi:.3f}, {self.estimate_words()}, {len(self.map_points)} contacts in "
+            f"{self.n_actions} actions (median isolation error {iso:.2f} cm), "
+            f"wall {self.wall_time_s:.1f} s"
         )
 
 

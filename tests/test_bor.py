@@ -150,7 +150,19 @@ def drake_contact_error_cm(bor, context, points) -> float:
 
 def test_short_fb_tracks_contacts_and_scores(short_fb):
     bor, simulator, _, result = short_fb
-    print("\n" + result.summary())
+    summary = result.summary()
+    print("\n" + summary)
+    # The line says how far the estimate is from the target as the simulation left it (FB's
+    # box is centred on its frame, and looks the same turned half a turn).
+    assert result.estimate is not None
+    X_WT = bor.scene.free_bodies[bor.target_name].EvalPoseInWorld(
+        bor.scene.plant.GetMyContextFromRoot(simulator.get_context()))
+    offset = np.array([result.estimate.x, result.estimate.y]) - X_WT.translation()[:2]
+    turn = result.estimate.yaw - np.arctan2(X_WT.rotation().matrix()[1, 0],
+                                            X_WT.rotation().matrix()[0, 0])
+    turn = min(abs(turn - k * np.pi) for k in range(-3, 4))
+    assert (f"target estimate {100 * np.linalg.norm(offset):.2f} cm and "
+            f"{np.degrees(turn):.1f} deg off, ") in summary
     print("contacts per action", result.contacts_per_action.tolist(),
           "isolation errors (cm)", np.round(result.isolation_errors * 100, 2).tolist())
     assert result.n_actions == N_SHORT
@@ -257,6 +269,7 @@ def test_run_command_prints_one_result_line(capsys, tmp_path, monkeypatch):
     lines = capsys.readouterr().out.splitlines()
     assert code == 0
     assert lines[0].startswith("FB stucco seed 0: GS n/a, CE ") and "in 4 actions" in lines[0]
+    assert "target estimate" in lines[0]  # its distance from the truth, or that there is none
     assert plot.stat().st_size > 10_000
     expected = SoftTrackingParams.from_mapping({"touched_side_margin": 0.002,
                                                 "n_particles": 50})

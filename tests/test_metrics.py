@@ -7,10 +7,12 @@ import pytest
 
 from stucco_drake.core import (
     BoxSdf,
+    CylinderSdf,
     ambiguity,
     contact_error,
     fowlkes_mallows,
     paired_median_gap,
+    target_pose_error,
 )
 
 
@@ -86,3 +88,38 @@ def test_paired_median_gap_tells_a_shift_from_noise():
         paired_median_gap([1, 2, 3], [1, 2], np.random.default_rng(0))
     with pytest.raises(ValueError, match="no trial with both values finite"):
         paired_median_gap([np.nan], [1.0], np.random.default_rng(0))
+
+
+def placed_sdf(shape, pose):
+    """The signed distance of ``shape`` placed at planar pose (x, y, yaw), on world points."""
+    x, y, yaw = pose
+    c, s = np.cos(yaw), np.sin(yaw)
+    R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return lambda points: shape((np.asarray(points) - [x, y, 0.0]) @ R)
+
+
+def test_target_pose_error_is_zero_for_a_pose_the_shape_cannot_tell_apart():
+    # A box off its frame's origin, turned half a turn about its own centre: the same box.
+    box = BoxSdf((0.03, 0.08, 0.1), center=(0.02, -0.01, 0.1))
+    truth = np.array([0.2, 0.1, 0.3])
+    c, s = np.cos(truth[2]), np.sin(truth[2])
+    centre = truth[:2] + np.array([[c, -s], [s, c]]) @ [0.02, -0.01]
+    turned = np.array([*(2 * centre - truth[:2]), truth[2] + np.pi])  # origin mirrored
+    points = np.random.default_rng(0).uniform([0.0, -0.1, 0.0], [0.4, 0.3, 0.2], (500, 3))
+    np.testing.assert_allclose(placed_sdf(box, turned)(points), placed_sdf(box, truth)(points),
+                               atol=1e-12)  # the independent check that it is the same box
+    assert target_pose_error(turned, truth, box) == pytest.approx((0.0, 0.0), abs=1e-12)
+
+
+def test_target_pose_error_measures_offsets_and_turns_modulo_the_symmetry():
+    box = BoxSdf((0.03, 0.08, 0.1))
+    # 3-4-5 cm offset; 170 deg is 10 deg from a box's half turn.
+    error = target_pose_error([0.03, 0.04, np.radians(170)], [0.0, 0.0, 0.0], box)
+    assert error == pytest.approx((0.05, np.radians(10)), abs=1e-12)
+    assert target_pose_error([0, 0, np.radians(-75)], [0, 0, np.radians(80)], box)[1] == \
+        pytest.approx(np.radians(25), abs=1e-12)  # -155 deg: 25 from -180
+    square = BoxSdf((0.05, 0.05, 0.1))
+    assert target_pose_error([0, 0, np.radians(100)], [0, 0, 0], square)[1] == \
+        pytest.approx(np.radians(10), abs=1e-12)
+    distance, yaw = target_pose_error([0.1, 0.0, 2.0], [0.1, 0.02, 0.0], CylinderSdf(0.04, 0.06))
+    assert distance == pytest.approx(0.02, abs=1e-12) and np.isnan(yaw)

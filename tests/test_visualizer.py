@@ -111,6 +111,50 @@ def test_outline_hidden_until_an_estimate(meshcat):
     assert visible(meshcat, "/stucco/target") is False
 
 
+def test_estimate_body_sits_inside_the_outline(meshcat):
+    visualizer = ContactTrackingVisualizer(meshcat, CylinderSdf(0.04, 0.06, (0.0, 0.0, 0.06)),
+                                           publish_period=0.1)  # fmt: skip
+    context = visualizer.CreateDefaultContext()
+    fix_inputs(visualizer, context, POINTS, LABELS, ActionContacts(), X_WO)
+    visualizer.ForcedPublish(context)
+    body = unpack(meshcat._GetPackedObject("/stucco/target/body"))["object"]
+    (geometry,), (material,) = body["geometries"], body["materials"]
+    assert geometry["type"] == "CylinderGeometry"
+    assert geometry["radiusTop"] == pytest.approx(0.04)
+    assert geometry["height"] == pytest.approx(0.12)
+    assert material["transparent"] and material["opacity"] < 0.5  # the points inside show
+    # At the cylinder's centre in the target frame; the frame is the outline's (the estimate).
+    np.testing.assert_allclose(translation_at(meshcat, "/stucco/target/body"), [0, 0, 0.06])
+    # The spheres are large enough to see from a view of the whole scene (1 cm and more), and
+    # the latest contacts translucent around the tracked points drawn at the same places.
+    point = unpack(meshcat._GetPackedObject("/stucco/map/0/0"))["object"]
+    assert point["geometries"][0]["radius"] >= 0.01
+    contact = unpack(meshcat._GetPackedObject("/stucco/contacts/0"))
+    assert contact is None or contact["object"]["materials"][0]["transparent"]
+
+
+def test_a_scene_opens_looking_into_the_cupboard_over_its_walls(meshcat):
+    from stucco_drake.bor import object_surfaces
+
+    built = build_scene(load_scene("FB"), meshcat=meshcat)
+    x, z, minus_y = unpack(meshcat._GetPackedProperty("/Cameras/default/rotated/<object>",
+                                                      "position"))["value"]  # three.js: y up
+    camera = np.array([x, -minus_y, z])
+    context = built.plant.CreateDefaultContext()
+    surfaces = object_surfaces(built, context)
+    fixed = [s for name in built.welded_bodies for s in surfaces.get(name, [])]
+    assert fixed, "FB has walls"
+    # The straight line from the camera to each object's centre crosses no wall.
+    for name, body in built.free_bodies.items():
+        centre = body.EvalPoseInWorld(context).translation()
+        line = camera + np.linspace(0.0, 1.0, 400)[:, None] * (centre - camera)
+        clearance = min(float(np.min(surface(line))) for surface in fixed)
+        assert clearance > 0.0, f"a wall hides {name}"
+        assert np.linalg.norm(centre - camera) < 2.0, f"{name} is too far to see"
+    camera_object = unpack(meshcat._GetPackedObject("/Cameras/default/rotated"))["object"]
+    assert camera_object["object"]["fov"] < 75.0  # narrower than Meshcat's default view
+
+
 def test_outline_edges():
     start, end = shape_outline(BOX)
     assert start.shape == end.shape == (3, 12)
@@ -172,9 +216,7 @@ class ScriptedTracking(LeafSystem):
 
 def add_visualized_tracking(builder, meshcat, centre) -> ContactTrackingVisualizer:
     source = builder.AddSystem(ScriptedTracking(centre))
-    visualizer = builder.AddSystem(ContactTrackingVisualizer(
-        meshcat, BOX, publish_period=0.05, point_radius=0.008, contact_radius=0.01
-    ))
+    visualizer = builder.AddSystem(ContactTrackingVisualizer(meshcat, BOX, publish_period=0.05))
     for name in ("map_points", "segment_labels", "action_contacts", "target_pose"):
         builder.Connect(source.GetOutputPort(name), visualizer.GetInputPort(name))
     return visualizer
@@ -246,8 +288,8 @@ def test_recording_renders_in_chromium(meshcat, tmp_path):
     centre = target.EvalPoseInWorld(built.plant.CreateDefaultContext()).translation()
     add_visualized_tracking(builder, meshcat, centre)
     simulator = Simulator(builder.Build())
-    # Close in on the target, from above, so the markers span several pixels.
-    meshcat.SetCameraPose(centre + np.array([0.1, -0.25, 0.5]), centre)
+    # No camera set here: the view the scene opens with (over the robot's shoulder) must show
+    # the markers at their default size.
     meshcat.StartRecording(set_visualizations_while_recording=False)
     simulator.AdvanceTo(2 * scene.action_duration)  # two actions
     meshcat.StopRecording()
@@ -274,9 +316,10 @@ def test_recording_renders_in_chromium(meshcat, tmp_path):
     # The outline is unlit magenta, a colour nothing else in the scene has; it is hidden until
     # 1 s, so it shows only if the recorded animation played.
     magenta = np.count_nonzero((r > 180) & (b > 180) & (g < 90))
-    # Bluish-green spheres (palette colour 2, every third point): the scene itself has nearly
-    # none of that hue (18 pixels without the visualizer, about 100 with it).
-    green = np.count_nonzero((g > r + 50) & (g > b + 20))
+    # Bluish-green spheres (palette colour 2, every third point; far more blue than red): the
+    # scene itself has nearly none of that hue (1 pixel without the visualizer, about 100 with
+    # it, in the scene's opening view).
+    green = np.count_nonzero((g > r + 50) & (g > b + 20) & (b > r + 40))
     assert rgb.std() > 20, "the screenshot is flat"
     assert colourful > 0.03, f"only {colourful:.1%} saturated pixels"
     assert distinct > 40, f"only {distinct} distinct colours"

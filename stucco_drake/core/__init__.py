@@ -9,6 +9,7 @@ from stucco_drake.core.metrics import (
     contact_error,
     fowlkes_mallows,
     paired_median_gap,
+    target_pose_error,
 )
 from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.params import SoftTrackingParams
@@ -36,4 +37,5 @@ __all__ = [
     "estimate_target_pose",
     "fowlkes_mallows",
     "paired_median_gap",
+    "target_pose_error",
 ]

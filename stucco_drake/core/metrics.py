@@ -1,4 +1,5 @@
-"""Tracking metrics of the paper: contact error, Fowlkes-Mallows index, ambiguity."""
+"""Tracking metrics of the paper (contact error, Fowlkes-Mallows index, ambiguity) and the
+error of a target pose estimate."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.validation import as_finite_array
 
 
@@ -61,6 +63,36 @@ def fowlkes_mallows(labels_true, labels_pred) -> float:
     if together_both == 0.0:
         return 0.0
     return float(together_both / np.sqrt(together_pred * together_true))
+
+
+def target_pose_error(estimate, truth, shape: BoxSdf | CylinderSdf) -> tuple[float, float]:
+    """(position error in m, yaw error in rad) of an estimated planar pose of a target.
+
+    Args:
+        estimate, truth: (x, y, yaw) of the target's frame in the world (m, m, rad).
+        shape: the target's shape in its frame, upright (its axis along z).
+
+    The position error is the horizontal distance between the shape's centres placed at the
+    two poses (the centre, not the frame origin, is what a turn by a symmetry leaves in
+    place). The yaw error is the smallest turn about that centre that takes one pose's shape
+    onto the other's: modulo pi for a box (pi/2 for a square one); NaN for a cylinder, which
+    looks the same at any yaw.
+    """
+    estimate = as_finite_array(estimate, "estimate", (3,))
+    truth = as_finite_array(truth, "truth", (3,))
+    centre = np.asarray(shape.center, dtype=np.float64)[:2]
+
+    def centre_in_world(pose: np.ndarray) -> np.ndarray:
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        return pose[:2] + np.array([[c, -s], [s, c]]) @ centre
+
+    distance = float(np.linalg.norm(centre_in_world(estimate) - centre_in_world(truth)))
+    if isinstance(shape, CylinderSdf):
+        return distance, float("nan")
+    hx, hy, _ = shape.half_extents
+    period = np.pi / 2 if hx == hy else np.pi
+    turn = (estimate[2] - truth[2]) % period
+    return distance, float(min(turn, period - turn))
 
 
 #: Distance (m) from the robot to the second-closest object at which ambiguity reaches 0.

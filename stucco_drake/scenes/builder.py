@@ -42,6 +42,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain
 
 from stucco_drake.models import add_iiwa14_with_bubble_gripper, configure_parser
+from stucco_drake.scenes.meshcat_session import show_over_the_shoulder
 from stucco_drake.scenes.primitives import add_primitive
 from stucco_drake.scenes.scene_file import ControlParams, Primitive, SceneFile, SceneFileError
 from stucco_drake.systems.planar_controller import (
@@ -250,7 +251,8 @@ def _start_positions(robot_plant: MultibodyPlant, scene: SceneFile):
 
 def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = False,
                 command_hook=None) -> BuiltScene:
-    """Builds ``scene`` into a Diagram (see the module docstring); optionally draws to meshcat.
+    """Builds ``scene`` into a Diagram (see the module docstring); optionally draws to meshcat
+    (and points its camera into the scene, see :func:`show_over_the_shoulder`).
 
     With ``external_actions`` the Diagram exports a ``planar_step`` input instead of playing
     ``scene.actions``. ``command_hook(builder, desired_state, robot_state)``, if given, gets the
@@ -341,8 +343,11 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
     diagram = builder.Build()
     diagram.set_name(f"scene_{scene.name}")
     free, welded = _object_bodies(plant)
-    return BuiltScene(scene, diagram, plant, scene_graph, robot_plant, ctrl, sequence, q_start,
-                      free, welded)
+    built = BuiltScene(scene, diagram, plant, scene_graph, robot_plant, ctrl, sequence, q_start,
+                       free, welded)
+    if meshcat is not None:
+        show_over_the_shoulder(meshcat, built)
+    return built
 
 
 def _object_bodies(plant: MultibodyPlant):

@@ -16,7 +16,7 @@ import itertools
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import Rgba, Sphere
+from pydrake.geometry import Box, Cylinder, Rgba, Sphere
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
 
@@ -35,8 +35,13 @@ SEGMENT_PALETTE = (
 )
 #: Points with a negative label (unsegmented or noise).
 UNLABELLED_COLOR = Rgba(0.55, 0.55, 0.55)
-CONTACT_COLOR = Rgba(0.05, 0.05, 0.05)
+#: The latest contacts: a dark, translucent shell, so the segment colour of a point drawn at the
+#: same place still shows through it.
+CONTACT_COLOR = Rgba(0.05, 0.05, 0.05, 0.35)
 OUTLINE_COLOR = Rgba(1.0, 0.0, 1.0)
+#: The estimated target's body inside its outline: translucent, so what it covers shows; a
+#: line is a pixel wide in a browser, and the body keeps the estimate visible from afar.
+ESTIMATE_BODY_COLOR = Rgba(1.0, 0.0, 1.0, 0.3)
 
 
 def segment_color_index(label: int) -> int:
@@ -71,6 +76,17 @@ def shape_outline(shape: BoxSdf | CylinderSdf, sides: int = 24) -> tuple[np.ndar
         end = np.array([e for _, e in segments]) + center
         return start.T, end.T
     raise ValueError(f"target_shape: {type(shape).__name__} is neither BoxSdf nor CylinderSdf")
+
+
+def shape_geometry(shape: BoxSdf | CylinderSdf) -> tuple[Box | Cylinder, RigidTransform]:
+    """The Drake geometry of ``shape`` and its pose in the shape's frame (m)."""
+    if isinstance(shape, BoxSdf):
+        geometry = Box(*(2.0 * np.asarray(shape.half_extents, dtype=float)))
+    elif isinstance(shape, CylinderSdf):
+        geometry = Cylinder(shape.radius, 2.0 * shape.half_height)
+    else:
+        raise ValueError(f"target_shape: {type(shape).__name__} is neither BoxSdf nor CylinderSdf")
+    return geometry, RigidTransform(np.asarray(shape.center, dtype=float))
 
 
 @dataclasses.dataclass
@@ -134,8 +150,9 @@ class ContactTrackingVisualizer(LeafSystem):
 
     Paths: ``{prefix}/map/{c}/{k}`` MAP points as spheres coloured by segment (``c`` the
     palette index, or ``unlabelled``); ``{prefix}/contacts/{k}`` the latest action's contact
-    points, larger and dark; ``{prefix}/target`` the estimated target frame with the shape's
-    wireframe at ``{prefix}/target/outline``. All positions are in the world frame (m).
+    points, larger, dark and translucent; ``{prefix}/target`` the estimated target frame with
+    the shape's wireframe at ``{prefix}/target/outline`` and its translucent body at
+    ``{prefix}/target/body``. All positions are in the world frame (m).
 
     Input ports (each optional: an unconnected port is not drawn):
         map_points: (n, 3) numpy array of MAP contact points (m, world).
@@ -161,7 +178,7 @@ class ContactTrackingVisualizer(LeafSystem):
     """
 
     def __init__(self, meshcat, target_shape: BoxSdf | CylinderSdf, publish_period: float, *,
-                 point_radius: float = 0.004, contact_radius: float = 0.007,
+                 point_radius: float = 0.01, contact_radius: float = 0.014,
                  prefix: str = "/stucco"):
         super().__init__()
         if not publish_period > 0:
@@ -169,6 +186,7 @@ class ContactTrackingVisualizer(LeafSystem):
         self._meshcat = meshcat
         self._prefix = prefix.rstrip("/")
         self._outline = shape_outline(target_shape)
+        self._body = shape_geometry(target_shape)
         self._points = self.DeclareAbstractInputPort(
             "map_points", AbstractValue.Make(np.zeros((0, 3)))
         )
@@ -243,6 +261,9 @@ class ContactTrackingVisualizer(LeafSystem):
         if self._target_shown is None:
             start, end = self._outline
             self._meshcat.SetLineSegments(f"{target}/outline", start, end, 2.0, OUTLINE_COLOR)
+            geometry, X_OG = self._body
+            self._meshcat.SetObject(f"{target}/body", geometry, ESTIMATE_BODY_COLOR)
+            self._meshcat.SetTransform(f"{target}/body", X_OG)
             # Hidden from the recording's start until an estimate exists (see the pools).
             self._meshcat.SetProperty(target, "visible", False, 0.0)
             self._target_shown = False
