@@ -29,7 +29,7 @@ _EPISODE = textwrap.dedent("""
     from stucco_drake.bor_log import log_penetration, record_episode
     from stucco_drake.eval.replay import replay
 
-    log = record_episode("FB", 5, n_actions=4)
+    log = record_episode("FB", 5, n_actions=3)
     log.save(sys.argv[1])
     row = replay(log, "stucco", penetration=log_penetration(log), dx_model="cone")
     print(json.dumps({"kernels": kernels.status(), "ce_cm": float(row["ce_cm"]),
@@ -66,7 +66,7 @@ def test_the_other_cpus_kernels_change_the_arithmetic():
 
 @pytest.mark.skipif(kernels.status() != "pinned", reason=f"kernels {kernels.status()}")
 def test_an_episode_and_its_replay_are_bit_identical_across_processes_and_cpus(tmp_path):
-    """FB's first 4 actions (contacts on the target from the third) recorded in two processes
+    """FB's first 3 actions (the third touches the target) recorded in two processes
     at once, one as another CPU would run it, then STUCCO replayed on each log."""
     runs = {name: _python(_EPISODE, str(tmp_path / f"{name}.npz"), env=env)
             for name, env in (("here", None), ("other", OTHER_CPU))}  # fmt: skip
