@@ -140,6 +140,17 @@ def point_spread(particle_points, log_weights) -> np.ndarray:
     return np.sqrt(np.einsum("p,pn->n", weights, np.sum((points - mean) ** 2, axis=-1)))
 
 
+def tracker_spread(tracker) -> np.ndarray | None:
+    """:func:`point_spread` of a tracker that holds particles (``points`` (P, n, 3) and
+    ``log_weights`` (P,), as :class:`~stucco_drake.core.soft_tracker.SoftTracker`); None for
+    one that does not (the clustering baselines) or holds no point."""
+    if not (hasattr(tracker, "points") and hasattr(tracker, "log_weights")):
+        return None
+    if tracker.n_contacts == 0:
+        return None
+    return point_spread(tracker.points, tracker.log_weights)
+
+
 def contact_costs(poses, points, sigma, shape, params: HypothesisParams):
     """(B,) contact cost of each pose and (B, n) which points it explains (see the module)."""
     local = np.einsum("bni,bij->bnj", points[None, :, :2] - poses[:, None, :2],
@@ -310,16 +321,16 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
         batch = np.flatnonzero(contact <= bound[0] + margin)
         costs[batch] = contact[batch] + free_space_costs(
             poses[batch], explained[batch], height, free_space, fill, params)
-        return poses, costs
+        return poses, costs, explained
 
     fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
-    poses, costs = scored(np.concatenate([*fits, grid_candidates(points, sigma, shape, params)]))
+    poses, costs, _ = scored(np.concatenate([*fits, grid_candidates(points, sigma, shape,
+                                                                    params)]))  # fmt: skip
     best = poses[np.argsort(costs, kind="stable")[:params.n_polish]]
-    poses, costs = scored(np.concatenate([poses, _polish(rng, best, points, sigma, shape,
-                                                         outline, params)]))  # fmt: skip
+    poses, costs, explained = scored(np.concatenate(
+        [poses, _polish(rng, best, points, sigma, shape, outline, params)]))
     # Hypotheses weighing under e^-15 of the best, or explaining too few points to pin a
     # pose, carry no information: left out.
-    explained = contact_costs(poses, points, sigma, shape, params)[1]
     keep = (costs <= costs.min() + margin) & (explained.sum(axis=1) >= params.min_explained)
     keep |= costs == costs.min()
     poses, costs, explained = poses[keep], costs[keep], explained[keep]

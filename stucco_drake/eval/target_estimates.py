@@ -18,8 +18,8 @@ from stucco_drake.core.pose_hypotheses import (
     FreeSpace,
     HypothesisParams,
     PoseHypotheses,
-    point_spread,
     pose_hypotheses,
+    tracker_spread,
 )
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.target_pose import TargetPoseEstimate, estimate_target_pose
@@ -66,9 +66,7 @@ def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: Robot
     points, labels = tracker.map_points(), np.asarray(tracker.segment())
     if np.bincount(labels[labels >= 0], minlength=1).max() < params.min_explained:
         return None
-    spread = None
-    if hasattr(tracker, "log_weights") and hasattr(tracker, "points"):
-        spread = point_spread(tracker.points, tracker.log_weights)
+    spread = tracker_spread(tracker)
     free = FreeSpace(penetration, log.ee_position, log.ee_rotation[-1], point_steps(log))
     return pose_hypotheses(rng, points, labels, shape, spread=spread, free_space=free,
                            params=params)  # fmt: skip

@@ -12,7 +12,7 @@ from pydrake.systems.framework import LeafSystem
 
 from stucco_drake.core.contact_motion import DX_MODELS, contact_motion
 from stucco_drake.core.observation import ActionContacts
-from stucco_drake.core.pose_hypotheses import point_spread
+from stucco_drake.core.pose_hypotheses import tracker_spread
 from stucco_drake.core.tracker import Tracker
 
 
@@ -154,7 +154,5 @@ class SoftTrackingFilter(LeafSystem):
 
     def _calc_point_spread(self, context, output):
         tracker = self.tracking_state(context).tracker
-        if tracker.n_contacts and hasattr(tracker, "points") and hasattr(tracker, "log_weights"):
-            output.set_value(point_spread(tracker.points, tracker.log_weights))
-        else:
-            output.set_value(np.zeros(tracker.n_contacts))
+        spread = tracker_spread(tracker)
+        output.set_value(np.zeros(tracker.n_contacts) if spread is None else spread)
