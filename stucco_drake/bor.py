@@ -253,6 +253,12 @@ def _seeds(seed: int) -> list[int]:
     return [int(s) for s in np.random.SeedSequence(seed).generate_state(3)]
 
 
+def _noise_seeds(seed: int) -> list[int]:
+    """Seeds of the torque and bubble noise from the episode's seed, a stream of their own
+    (the others' draws stay as they were without noise)."""
+    return [int(s) for s in np.random.SeedSequence([seed, 1]).generate_state(2)]
+
+
 def build_bor_diagram(
     scene: SceneFile | str,
     method: str = "stucco",
@@ -270,7 +276,7 @@ def build_bor_diagram(
     Args:
         scene: the scene.
         method: a tracker name of :func:`~stucco_drake.core.baselines.make_tracker`.
-        seed: seed of every random stream (tracker, ICP restarts, CPF).
+        seed: seed of every random stream (tracker, ICP restarts, CPF, sensor noise).
         meshcat: draw the scene to this Meshcat (None: no drawing).
         tracker_params: the method's parameters; default the scene's for STUCCO (its
             ``tracker_preset`` and overrides), the paper's for the baselines.
@@ -303,11 +309,20 @@ def build_bor_diagram(
     builder.Connect(sub.GetOutputPort("robot_state"), arm_state.get_input_port())
     builder.Connect(sub.GetOutputPort("applied_torque"), arm_torque.get_input_port())
 
-    stats = calibrate_residual_statistics(time_step=h, estimator_kwargs={"gain": estimator_gain})
+    noise = scene.sensor_noise
+    torque_seed, bubble_seed = _noise_seeds(seed)
+    observer = {"gain": estimator_gain}
+    if noise.torque_std > 0 or noise.velocity_std > 0:
+        observer.update(torque_noise_std=noise.torque_std, velocity_noise_std=noise.velocity_std,
+                        noise_seed=torque_seed)  # fmt: skip
+    # Calibrated once per noise level on draws of their own (seed 0, as a sensor is
+    # calibrated once, not per episode): the detector's statistics are those of the sensor.
+    calibration = dict(observer, noise_seed=0) if "noise_seed" in observer else observer
+    stats = calibrate_residual_statistics(time_step=h, estimator_kwargs=calibration)
     estimator = builder.AddNamedSystem("wrench_estimator", ExternalWrenchEstimator(
-        h, gain=estimator_gain, X_WB=X_WB, finger_positions=fingers, residual_statistics=stats,
+        h, X_WB=X_WB, finger_positions=fingers, residual_statistics=stats,
         # The scene's ports decide which torque goes with which state (estimator's Timing).
-        sampled_plant_outputs=bool(scene.plant.use_sampled_output_ports),
+        sampled_plant_outputs=bool(scene.plant.use_sampled_output_ports), **observer,
     ))  # fmt: skip
     builder.Connect(arm_state.get_output_port(), estimator.GetInputPort("state"))
     builder.Connect(arm_torque.get_output_port(), estimator.GetInputPort("applied_torque"))
@@ -330,7 +345,9 @@ def build_bor_diagram(
     )
     builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
     bubbles = builder.AddNamedSystem(
-        "bubble_sensor", BubbleContactSensor(built.plant, built.scene_graph, h)
+        "bubble_sensor", BubbleContactSensor(built.plant, built.scene_graph, h,
+                                             noise_std=noise.bubble_point_std,
+                                             noise_seed=bubble_seed),
     )
     builder.Connect(sub.GetOutputPort("contact_results"), bubbles.GetInputPort("contact_results"))
     builder.Connect(sub.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))

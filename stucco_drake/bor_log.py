@@ -33,8 +33,8 @@ from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sets import PAPER_SCENES, scene_set
 from stucco_drake.eval.sources import EpisodeSource
-from stucco_drake.eval.target_estimates import rules_estimate
-from stucco_drake.grasp import build_grasp_scene, grasp_estimate
+from stucco_drake.eval.target_estimates import hypotheses_estimate, rules_estimate
+from stucco_drake.grasp import build_grasp_scene, grasp_at_pose
 from stucco_drake.gripper_sdf import gripper_penetration
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene, resolve_scene_path, scene_paths
 from stucco_drake.scenes.builder import yaw_of
@@ -237,26 +237,43 @@ def _grasp_scene(scene: str):
     return build_grasp_scene(load_scene(scene))
 
 
-def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None):
+def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
+                   estimator: str = "rules"):
     """Grasp the target where the tracker's points say it is, from the logged final state.
 
-    The target's pose is estimated as the BOR Diagram does
-    (:func:`~stucco_drake.core.target_pose.estimate_target_pose` with 30 restarts and the
-    gripper's pxpen at the logged end-effector positions since the chosen segment was last
-    touched, ``penetration_configs="since_touch"``), with a generator seeded by
-    ``[log.seed, 1]``; the grasp then runs in a freshly built grasp scene set to the logged
-    plant state (:func:`~stucco_drake.grasp.grasp_estimate`), that of ``scene`` (a scene
-    name or file; default: the shipped scene named ``log.scene``). Returns the
-    :class:`~stucco_drake.grasp.GraspResult`, or None when no segment can be fitted (no grasp
-    is attempted: a failure).
+    ``estimator`` picks how the target's pose is estimated, with a generator seeded by
+    ``[log.seed, 1]``:
+
+    * ``"rules"`` (Table II's): segment selection as the BOR Diagram does
+      (:func:`~stucco_drake.eval.target_estimates.rules_estimate`); a round target is closed
+      on away from the points outside the fitted segment;
+    * ``"hypotheses"``: the grasp chosen across weighted pose hypotheses
+      (:func:`~stucco_drake.eval.target_estimates.hypotheses_estimate`); a round target is
+      closed on away from the points the grasped pose does not explain.
+
+    The grasp then runs in a freshly built grasp scene set to the logged plant state, that of
+    ``scene`` (a scene name or file; default: the shipped scene named ``log.scene``). Returns
+    the :class:`~stucco_drake.grasp.GraspResult`, or None when no segment can be fitted (no
+    grasp is attempted: a failure).
     """
     built = _grasp_scene(log.scene if scene is None else str(scene))
     shape = target_shape(built)
-    estimate = rules_estimate(np.random.default_rng([log.seed, 1]), log, tracker, shape,
-                              log_penetration(log))  # fmt: skip
-    if estimate is None:
-        return None
+    rng = np.random.default_rng([log.seed, 1])
     points = tracker.map_points()
+    if estimator == "rules":
+        estimate = rules_estimate(rng, log, tracker, shape, log_penetration(log))
+        if estimate is None:
+            return None
+        pose = np.array([estimate.x, estimate.y, estimate.yaw])
+        clutter = np.delete(points, np.flatnonzero(np.isin(estimate.labels, estimate.members)),
+                            axis=0)  # fmt: skip
+    elif estimator == "hypotheses":
+        found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log))
+        if found is None:
+            return None
+        pose, clutter = found.pose, points[~found.explained[found.chosen]]
+    else:
+        raise ValueError(f"estimator: expected 'rules' or 'hypotheses', got {estimator!r}")
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     context.SetTime(float(log.info.get("final_time_s", 0.0)))
@@ -264,7 +281,7 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None):
         built.plant.GetMyMutableContextFromRoot(context), log.final_state
     )
     simulator.Initialize()
-    return grasp_estimate(built, simulator, estimate, points, shape)
+    return grasp_at_pose(built, simulator, pose, clutter, shape)
 
 
 def grasp_success(log: EpisodeLog, tracker, scene: str | None = None) -> bool:
@@ -272,7 +289,6 @@ def grasp_success(log: EpisodeLog, tracker, scene: str | None = None) -> bool:
     as :func:`grasp_from_log`'s)."""
     result = grasp_from_log(log, tracker, scene)
     return bool(result is not None and result.success)
-
 
 
 #: The paper's four Blind Object Retrieval scenes, as sources of ``stucco-drake table``.

@@ -47,14 +47,16 @@ def _table_settings(out: Path):
 
 
 def _summary(rows: list[dict]) -> str:
-    lines = ["base  n  rules near/median cm  hypotheses near/median cm  confident  grasped"]
+    lines = ["base  n   rules near/median cm/closes   hypotheses near/median cm/closes   "
+             "confidence   grasped"]
     for base in sorted({row["base"] for row in rows}):
         group = [row for row in rows if row["base"] == base]
         parts = [f"{base:<4} {len(group):>2}"]
         for name in ("rules", "hypotheses"):
             error = np.array([row[f"{name}_outline_m"] for row in group])
             near = int(np.sum(error < NEAR))
-            parts.append(f"{near:>2}/{len(group)} {np.nanmedian(error) * 100:6.1f}")
+            closes = sum(bool(row[f"{name}_closes"]) for row in group)
+            parts.append(f"{near:>2}/{len(group)} {np.nanmedian(error) * 100:6.1f} {closes:>2}")
         confident = np.mean([row["confidence"] for row in group])
         grasped = [row["grasp_success"] for row in group if row["grasp_success"] is not None]
         parts.append(f"mean {confident:.2f}")

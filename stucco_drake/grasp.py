@@ -27,21 +27,17 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 
+from stucco_drake.core.grasp_choice import PAD_HALF_WIDTH, grasp_at, grasp_closes
 from stucco_drake.core.grasp_yaw import cylinder_grasp_yaws
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.scenes.builder import GRIPPER, IIWA, BuiltScene, build_scene, yaw_of
 from stucco_drake.scenes.scene_file import SceneFile
 from stucco_drake.systems.grasp_executor import GraspExecutor
 
-#: Half width (m) of a bubble's contact pad across the closing axis (the membrane is 0.08 wide).
-PAD_HALF_WIDTH = 0.04
 #: Gripper frame to the palm's underside, and to the bubbles' lowest point (m, along world z).
 PALM_ABOVE_FRAME, BUBBLE_BELOW_FRAME = 0.06, 0.055
 #: Clearances (m): palm above the target's top, bubbles above the table, safe transit height.
 PALM_CLEARANCE, TABLE_CLEARANCE, SAFE_HEIGHT = 0.01, 0.01, 0.30
-#: Geometric criterion, box: max angle (rad) between the closing axis and the box's short axis,
-#: and min distance (m) from a pad's centre line to a vertical edge of the long face.
-MAX_AXIS_ERROR, EDGE_MARGIN = math.radians(15.0), 0.02
 EXECUTOR_NAME = "grasp_executor"
 #: Finger actuator effort limit (N) in grasp scenes; see :func:`build_grasp_scene`.
 FINGER_EFFORT = 120.0
@@ -119,65 +115,39 @@ def _robot_plant_of(builder):
 def grasp_pose(target_pose, target_shape, current_yaw: float):
     """(x, y, yaw, z_grasp) of the gripper frame for a top-down grasp (m, rad, world).
 
-    ``target_pose`` is a RigidTransform X_WO or (x, y, yaw). The yaw closes the fingers along
-    the box's shorter horizontal half-extent axis; a cylinder keeps ``current_yaw``. The height
-    puts the palm ``PALM_CLEARANCE`` above the top of a target resting on the table (its top at
-    twice its half height), but keeps the bubbles ``TABLE_CLEARANCE`` above the table.
+    ``target_pose`` is a RigidTransform X_WO or (x, y, yaw). The grasp is
+    :func:`~stucco_drake.core.grasp_choice.grasp_at`'s: across a box's shorter horizontal
+    side; a cylinder keeps ``current_yaw``. The height puts the palm ``PALM_CLEARANCE`` above
+    the top of a target resting on the table (its top at twice its half height), but keeps the
+    bubbles ``TABLE_CLEARANCE`` above the table.
     """
-    x, y, yaw = _planar(target_pose)
-    if isinstance(target_shape, BoxSdf):
-        hx, hy, hz = target_shape.half_extents
-        grasp_yaw = yaw if hx <= hy else yaw + math.pi / 2
-    elif isinstance(target_shape, CylinderSdf):
-        hz, grasp_yaw = target_shape.half_height, current_yaw
-    else:
-        raise TypeError(f"unsupported target shape {type(target_shape).__name__}")
+    x, y, yaw = grasp_at(np.array(_planar(target_pose)), target_shape, current_yaw)[0]
+    hz = target_shape.half_extents[2] if isinstance(target_shape, BoxSdf) \
+        else target_shape.half_height
     z = max(2 * hz + PALM_CLEARANCE - PALM_ABOVE_FRAME, BUBBLE_BELOW_FRAME + TABLE_CLEARANCE)
-    return x, y, grasp_yaw, z
+    return float(x), float(y), float(yaw), z
 
 
 def geometric_check(X_WO: RigidTransform, X_WG: RigidTransform, target_shape) -> tuple[bool, str]:
-    """The paper's geometric grasp criterion, from true target pose X_WO and gripper pose X_WG.
-
-    Let p = (p_x, p_y) be the grasp centre (gripper frame origin) in the target frame and u the
-    fingers' closing axis (gripper x) projected on the target's horizontal plane.
-
-    * Box (half extents a <= b across/along its long faces): the fingers close on the two long
-      sides, not a corner, iff the angle between u and the short axis is at most
-      ``MAX_AXIS_ERROR`` (15 deg; parallel pads at a larger angle meet an edge first), the
-      centre lies between the long faces (|p_short| < a), and the pads' centre line meets the
-      long faces at least ``EDGE_MARGIN`` (2 cm) inside their vertical edges:
-      |p_long| + a |tan(angle)| <= b - EDGE_MARGIN.
-    * Cylinder (radius r): the fingers are around more than half of the can iff, with d the
-      distance of the can's axis from the closing line and s its coordinate along that line,
-      the pads (each 2 ``PAD_HALF_WIDTH`` wide across the closing axis) cover more than half of
-      the can's diameter perpendicular to the closing axis, |[d - w, d + w] & [-r, r]| > r
-      (for pads at least as wide as the can's radius, w >= r, this is d < w: the pads reach
-      past the can's axis), and |s| < r (the axis lies between the pads).
-    """
+    """The paper's geometric grasp criterion, from true target pose X_WO and gripper pose X_WG:
+    :func:`~stucco_drake.core.grasp_choice.grasp_closes` with the grasp centre p (the gripper
+    frame's origin) and the closing axis (gripper x) projected on the target's horizontal
+    plane, both in the target frame. Returns (ok, the numbers it was judged on)."""
     X_OG = X_WO.inverse() @ X_WG
-    p = X_OG.translation()
+    p = X_OG.translation()[:2]
     u = X_OG.rotation().matrix()[:2, 0]
-    u = u / max(np.linalg.norm(u), 1e-9)
+    grasp = np.array([p[0], p[1], math.atan2(u[1], u[0])])
+    ok = bool(grasp_closes(grasp, np.zeros(3), target_shape)[0, 0])
+    c = np.asarray(target_shape.center)[:2]
     if isinstance(target_shape, BoxSdf):
         hx, hy, _ = target_shape.half_extents
         short, long_ = (0, 1) if hx <= hy else (1, 0)
-        a, b = sorted((hx, hy))
-        c = np.asarray(target_shape.center)[:2]
-        angle = math.acos(min(1.0, abs(u[short])))
-        reach = abs(p[long_] - c[long_]) + a * math.tan(angle)
-        ok = angle <= MAX_AXIS_ERROR and abs(p[short] - c[short]) < a and \
-            reach <= b - EDGE_MARGIN
-        return ok, (f"axis error {math.degrees(angle):.1f} deg, offsets short "
-                    f"{p[short] - c[short]:+.3f} long {p[long_] - c[long_]:+.3f} m")
-    r = target_shape.radius
-    axis = np.asarray(target_shape.center)[:2] - p[:2]  # can axis relative to the grasp centre
-    s = float(axis @ u)
-    d = float(abs(axis[0] * u[1] - axis[1] * u[0]))
-    w = PAD_HALF_WIDTH
-    covered = max(0.0, min(d + w, r) - max(d - w, -r))
-    ok = covered > r and abs(s) < r
-    return ok, f"pads cover {covered / (2 * r):.0%} of the can, axis offset {d:.3f} m"
+        angle = math.degrees(math.acos(min(1.0, abs(math.cos(grasp[2] - short * math.pi / 2)))))
+        return ok, (f"axis error {angle:.1f} deg, offsets short {p[short] - c[short]:+.3f} "
+                    f"long {p[long_] - c[long_]:+.3f} m")
+    axis = c - p
+    d = abs(axis[0] * math.sin(grasp[2]) - axis[1] * math.cos(grasp[2]))
+    return ok, f"axis offset {d:.3f} m from the closing line"
 
 
 def between_fingers(X_WG: RigidTransform, p_WO, finger_q) -> bool:
@@ -205,24 +175,31 @@ def _finger_positions(built: BuiltScene, plant_context) -> tuple[float, float]:
                  for name in ("left_finger_joint", "right_finger_joint"))
 
 
-def grasp_estimate(built: BuiltScene, simulator: Simulator, estimate, points,
-                   target_shape) -> GraspResult:
-    """:func:`execute_grasp` at a :class:`~stucco_drake.core.target_pose.TargetPoseEstimate`.
+def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
+                  target_shape) -> GraspResult:  # fmt: skip
+    """:func:`execute_grasp` at an estimated ``target_pose`` (x, y, yaw; m, rad, world).
 
-    A cylinder is closed on first along the yaw that keeps the open fingers off the tracked
-    points (``points``, (n, 3) m world, the tracker's, oldest first) that the estimate did
-    not fit as the target (by its ``labels`` and ``members``), then along the other axes
-    (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaws`).
+    A cylinder is closed on first along the yaw that keeps the open fingers off ``clutter``
+    ((n, 3) m, world: tracked points the estimate does not put on the target), then along the
+    other axes (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaws`).
     """
     context = simulator.get_context()
     X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
+    x, y, yaw = (float(v) for v in target_pose)
+    yaws = cylinder_grasp_yaws((x, y), clutter, yaw_of(X_WG.rotation()))
+    return execute_grasp(built, simulator, (x, y, yaw), target_shape, cylinder_yaws=yaws)
+
+
+def grasp_estimate(built: BuiltScene, simulator: Simulator, estimate, points,
+                   target_shape) -> GraspResult:
+    """:func:`grasp_at_pose` at a :class:`~stucco_drake.core.target_pose.TargetPoseEstimate`,
+    the clutter being the tracked ``points`` ((n, 3) m, world, oldest first) outside the
+    segments it fitted (by its ``labels`` and ``members``)."""
     # Points sensed after the estimate was made (a live estimate is not remade when no
     # segment has enough points) lie beyond its labels and were not fitted: they stay.
     fitted = np.flatnonzero(np.isin(estimate.labels, estimate.members))
-    yaws = cylinder_grasp_yaws((estimate.x, estimate.y), np.delete(points, fitted, axis=0),
-                               yaw_of(X_WG.rotation()))  # fmt: skip
-    return execute_grasp(built, simulator, (estimate.x, estimate.y, estimate.yaw),
-                         target_shape, cylinder_yaws=yaws)  # fmt: skip
+    return grasp_at_pose(built, simulator, (estimate.x, estimate.y, estimate.yaw),
+                         np.delete(points, fitted, axis=0), target_shape)  # fmt: skip
 
 
 def _grasp_context(built: BuiltScene, simulator: Simulator):

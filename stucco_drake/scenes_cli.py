@@ -1,4 +1,5 @@
-"""The ``stucco-drake scenes`` subcommand: ``scenes randomize`` writes randomized layouts.
+"""The ``stucco-drake scenes`` subcommand: ``scenes randomize`` writes randomized layouts,
+``scenes noise`` copies of scenes with noisy sensing.
 
 See :mod:`stucco_drake.scenes.randomize` for how a layout is drawn and
 :mod:`stucco_drake.eval.sets` for the development and report ranges of layout seeds.
@@ -19,7 +20,8 @@ def add_scenes_command(subparsers) -> None:
     from stucco_drake.scenes.randomize import LayoutParams
 
     defaults = LayoutParams()
-    scenes = subparsers.add_parser("scenes", help="work with scene files: randomized layouts")
+    scenes = subparsers.add_parser(
+        "scenes", help="work with scene files: randomized layouts, noisy sensing")
     commands = scenes.add_subparsers(dest="scenes_command", required=True)
     randomize = commands.add_parser(
         "randomize", help="write randomized layouts of a scene: every movable object shifted "
@@ -42,6 +44,40 @@ def add_scenes_command(subparsers) -> None:
     randomize.add_argument("--max-draws", type=int, default=defaults.max_draws,
                            help="draws per layout before giving up (default %(default)d)")
     randomize.set_defaults(run=run_randomize)
+
+    from stucco_drake.scenes.sensor_noise import REAL_IIWA
+
+    noise = commands.add_parser(
+        "noise", help="write copies of scenes whose robot senses with noise (<scene>-noise.yaml; "
+                      "defaults: a real iiwa with bubbles, docs/sensor_noise.md)")  # fmt: skip
+    noise.add_argument("--scenes", nargs="+", required=True, help="scene names or scene files")
+    noise.add_argument("--out", required=True, help="output folder")
+    noise.add_argument("--torque-std", type=float, default=REAL_IIWA.torque_std,
+                       help="joint torque noise, N m (default %(default)g)")
+    noise.add_argument("--velocity-std", type=float, default=REAL_IIWA.velocity_std,
+                       help="joint velocity noise, rad/s (default %(default)g)")
+    noise.add_argument("--bubble-std", type=float, default=REAL_IIWA.bubble_point_std,
+                       help="bubble contact point noise per coordinate, m (default %(default)g)")
+    noise.set_defaults(run=run_noise)
+
+
+def run_noise(args: argparse.Namespace) -> int:
+    """Handler of ``stucco-drake scenes noise``: 0 written, 2 bad input."""
+    from stucco_drake.inputs import InputError
+    from stucco_drake.scenes import load_scene
+    from stucco_drake.scenes.scene_file import SensorNoise
+    from stucco_drake.scenes.sensor_noise import write_noisy_scene
+
+    noise = SensorNoise(args.torque_std, args.velocity_std, args.bubble_std)
+    if not min(args.torque_std, args.velocity_std, args.bubble_std) >= 0:
+        raise InputError(f"noise must be >= 0, got {noise}")
+    scenes = [load_scene(name) for name in args.scenes]  # all read before any is written
+    for scene in scenes:
+        try:
+            print(write_noisy_scene(scene, args.out, noise))
+        except ValueError as error:
+            raise InputError(str(error)) from None
+    return 0
 
 
 def _span(seeds: range) -> str:

@@ -104,9 +104,10 @@ class _TrueOutline:
         return np.zeros(len(self._points), dtype=np.int64)
 
 
-def test_grasp_from_log_lifts_the_target_at_its_outline(fb_log):
+@pytest.mark.parametrize("estimator", ["rules", "hypotheses"])
+def test_grasp_from_log_lifts_the_target_at_its_outline(fb_log, estimator):
     assert fb_log.n_contacts >= 4
-    result = grasp_from_log(fb_log, _TrueOutline(fb_log))
+    result = grasp_from_log(fb_log, _TrueOutline(fb_log), estimator=estimator)
     assert result is not None and result.success, result
     assert result.lift_height >= 0.05
 
@@ -117,6 +118,7 @@ def test_grasp_from_log_without_a_segment_is_a_failure(fb_log):
             return -np.ones(len(self._points), dtype=np.int64)  # all noise: nothing to fit
 
     assert grasp_from_log(fb_log, Empty(fb_log)) is None
+    assert grasp_from_log(fb_log, Empty(fb_log), estimator="hypotheses") is None
 
 
 def test_planar_specs_of_turned_and_lying_shapes():

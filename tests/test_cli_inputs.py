@@ -114,6 +114,8 @@ BAD_INPUTS = {
     "scheduler without dask": ("table --scenes SYN2 --scheduler tcp://127.0.0.1:1 --out {tmp}/t",
                                "--scheduler needs --executor dask"),
     "missing option": ("table --scenes SYN2", "required: --out"),
+    "noise < 0": ("scenes noise --scenes FB --bubble-std -0.001 --out {tmp}/n",
+                  "noise must be >= 0"),
     # Input files.
     "model file missing": ("sim --scene {tmp}/no_model.yaml", "no_model.yaml: directives[",
                            "].add_model.file: ", "999_cracker_box_10kg.sdf", "does not exist"),

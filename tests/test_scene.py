@@ -266,6 +266,8 @@ def test_friction_override_reaches_the_contact_solver():
         ("friction:\n  table: -0.1\n", "friction.table"),
         ("control:\n  kp: -1.0\n", "control.kp"),
         ("control:\n  finger_ki: -1.0\n", "control.finger_ki"),
+        ("sensor_noise:\n  torque_std: -0.5\n", "sensor_noise.torque_std"),
+        ("sensor_noise:\n  bubble_std: 0.002\n", "sensor_noise.bubble_std"),
     ],
 )
 def test_malformed_scene_file_fails_with_one_line(tmp_path, patch, key):

@@ -18,11 +18,11 @@ RSS 2023: contact points lie on the object's surface, free-space points outside 
   of tracked points, on every part of a segment wider than the target, and on every union of
   two segments the target could span; each is then refitted on the points it explains.
 
-The hypotheses' weights are ``exp(-cost / temperature)``, normalised. Two hypotheses agree when
-their posed outlines lie within ``agreement`` (Hausdorff distance, m): a grasp at one closes on
-the target at the other. The chosen pose is the one the most weight agrees with, and that
-weight is the confidence: the posterior probability that a grasp there closes on the target
-(0 when the chosen pose explains fewer than ``min_explained`` points: the target was barely
+The hypotheses' weights are ``exp(-cost / temperature)``, normalised. One grasp is made: the
+one that closes on the target (the paper's criterion, :mod:`~stucco_drake.core.grasp_choice`)
+under the most weight, at a hypothesis or at the weighted mean of those it closes on. That
+weight is the confidence: the posterior probability that the grasp closes on the target (0 when
+the hypothesis grasped explains fewer than ``min_explained`` points: the target was barely
 touched). Units: m, rad; world frame W.
 """
 
@@ -34,6 +34,7 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
+from stucco_drake.core.grasp_choice import choose_grasp
 from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_penetration import restart_penetration, sample_cross_section
@@ -54,8 +55,6 @@ class HypothesisParams:
         free_space_tolerance: penetration into the robot ignored per (config, point) pair.
         free_space_scale: penetration beyond the tolerance costing one unit.
         temperature: divides the costs before the weights are formed (dimensionless).
-        agreement: Hausdorff distance between posed outlines within which two hypotheses
-            count as the same grasp.
         min_explained: fewest contact points the chosen pose must explain for any confidence.
         n_restarts: ICP starts per proposal group.
         outline_spacing: spacing of the outline points ICP fits.
@@ -73,7 +72,6 @@ class HypothesisParams:
     free_space_tolerance: float = 0.002
     free_space_scale: float = 0.002
     temperature: float = 1.0
-    agreement: float = 0.015
     min_explained: int = 3
     n_restarts: int = 20
     outline_spacing: float = 0.002
@@ -112,9 +110,12 @@ class PoseHypotheses:
         costs: (k,) negative log-likelihoods (dimensionless, relative: only differences count).
         weights: (k,) posterior weights, summing to 1.
         explained: (k, n) whether each hypothesis puts each contact point on the target.
-        confidence: posterior weight of the hypotheses agreeing with the chosen one (0 to 1;
-            0 when it explains fewer than ``min_explained`` points).
-        chosen: index of the pose to grasp at: the one most weight agrees with.
+        confidence: posterior probability that the grasp at ``pose`` closes on the target
+            (0 to 1; 0 when the hypothesis nearest it explains fewer than ``min_explained``
+            points).
+        chosen: index of the hypothesis nearest ``pose``.
+        pose: (3,) the target pose (x, y, yaw) to grasp at (see
+            :func:`~stucco_drake.core.grasp_choice.choose_grasp`).
     """
 
     poses: np.ndarray
@@ -122,12 +123,8 @@ class PoseHypotheses:
     weights: np.ndarray
     explained: np.ndarray
     confidence: float
-    chosen: int = 0
-
-    @property
-    def pose(self) -> np.ndarray:
-        """(3,) the chosen pose (x, y, yaw)."""
-        return self.poses[self.chosen]
+    chosen: int
+    pose: np.ndarray
 
 
 def point_spread(particle_points, log_weights) -> np.ndarray:
@@ -338,25 +335,19 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     poses, costs, explained = poses[order], costs[order], explained[order]
     weights = np.exp(-(costs - costs[0]) / params.temperature)
     weights /= weights.sum()
-    # The grasp is made at one pose; it closes on the target under every hypothesis whose
-    # outline lies within the agreement of that pose's. Take the pose with the most weight so
-    # covered (the cheapest among equals), not merely the cheapest.
-    distance = cross_section_sdf(shape)
-    centres = transform(poses, coarse).mean(axis=1)
-    agree = np.eye(len(poses), dtype=bool)
-    # Outlines whose centroids lie farther apart than the agreement cannot agree.
-    close = np.hypot(*(centres[:, None] - centres[None]).transpose(2, 0, 1)) <= params.agreement
-    first, second = np.nonzero(np.triu(close, 1))
-    agree[first, second] = _agreement(distance, coarse, poses[first], poses[second]) \
-        <= params.agreement
-    agree |= agree.T
-    covered = agree.astype(np.float64) @ weights
-    # The grasp is at the cheapest pose of the group most weight agrees with: the group's
-    # centre of weight may lie between hypotheses.
-    group = np.flatnonzero(agree[int(np.argmax(np.round(covered, 12)))])
-    chosen = int(group[np.argmin(costs[group])])
-    confidence = float(covered[chosen])
+    # One grasp is made: where it closes on the target under the most weight (the cheapest
+    # among equals). Its probability of closing on the target is the confidence.
+    choice = choose_grasp(poses, weights, shape)
+    chosen = _nearest(poses, choice.target_pose)
+    confidence = choice.probability
     if explained[chosen].sum() < params.min_explained:
         confidence = 0.0
     poses[:, 2] = (poses[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
-    return PoseHypotheses(poses, costs, weights, explained, confidence, chosen)
+    target = choice.target_pose.copy()
+    target[2] = (target[2] + np.pi) % (2.0 * np.pi) - np.pi
+    return PoseHypotheses(poses, costs, weights, explained, confidence, chosen, target)
+
+
+def _nearest(poses, pose) -> int:
+    """Index of the hypothesis nearest ``pose`` (position; the first among equals)."""
+    return int(np.argmin(np.hypot(*(poses[:, :2] - pose[:2]).T)))

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from stucco_drake.core.icp import sample_outline, transform
+from stucco_drake.core.grasp_choice import grasp_at, grasp_closes
+from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline, transform
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_hypotheses import (
     FreeSpace,
@@ -72,6 +73,14 @@ def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: Robot
                            params=params)  # fmt: skip
 
 
+def target_surface_distance(shape, points, pose) -> np.ndarray:
+    """(n,) signed distance (m, negative inside) of ``points`` (n, 3) to the target's
+    cross-section posed at ``pose`` (x, y, yaw)."""
+    local = np.einsum("ni,ij->nj", np.asarray(points, dtype=np.float64)[:, :2] - pose[:2],
+                      rotations(pose[2]))  # fmt: skip
+    return cross_section_sdf(shape)(local)
+
+
 def outline_error(shape, estimate, truth, spacing: float = 0.005) -> float:
     """Symmetric Hausdorff distance (m) between the target's outline at two poses (x, y, yaw):
     0 for a box turned by pi, whatever the yaw for a cylinder."""
@@ -89,16 +98,27 @@ def score_estimates(log: EpisodeLog, tracker, penetration: RobotPenetration,
     as the grasp's."""
     shape = log_target_shape(log)
     truth = log.object_poses[-1, 0][[0, 1, -1]]
+    on_target = log.contact_object == 0
     row = {"scene": log.scene, "seed": int(log.seed),
-           "target_contacts": int(np.count_nonzero(log.contact_object == 0))}  # fmt: skip
+           "target_contacts": int(np.count_nonzero(on_target))}  # fmt: skip
+    # How well the tracked points that were sensed on the target fit its true final outline:
+    # the floor under any pose estimate (CE counts the nearest surface of any object instead).
+    offsets = np.abs(target_surface_distance(shape, tracker.map_points()[on_target], truth))
+    row["target_points_median_m"] = float(np.median(offsets)) if len(offsets) else np.nan
+    row["target_points_within_5mm"] = float(np.mean(offsets < 0.005)) if len(offsets) else np.nan
     rules = rules_estimate(np.random.default_rng([log.seed, 1]), log, tracker, shape, penetration)
     found = hypotheses_estimate(np.random.default_rng([log.seed, 1]), log, tracker, shape,
                                 penetration, params)  # fmt: skip
+    closing_yaw = float(np.arctan2(log.ee_rotation[-1][1, 0], log.ee_rotation[-1][0, 0]))
     for name, pose in (("rules", None if rules is None else rules.pose),
                        ("hypotheses", None if found is None else found.pose)):  # fmt: skip
         row[f"{name}_position_m"] = np.nan if pose is None else float(
             np.hypot(*(pose[:2] - truth[:2])))  # fmt: skip
         row[f"{name}_outline_m"] = np.nan if pose is None else outline_error(shape, pose, truth)
+        # The paper's criterion for the grasp at the estimate, at the target's true pose (the
+        # target does not move on the way down): the grasp's outcome without simulating it.
+        row[f"{name}_closes"] = pose is not None and bool(
+            grasp_closes(grasp_at(pose, shape, closing_yaw), truth, shape)[0, 0])
     row["confidence"] = 0.0 if found is None else found.confidence
     row["hypotheses"] = 0 if found is None else len(found.poses)
     return row

@@ -126,6 +126,24 @@ class ControlParams:
 
 
 @dataclasses.dataclass
+class SensorNoise:
+    """Zero-mean Gaussian noise on the robot's senses (0: noise-free, the paper's simulation).
+
+    Attributes:
+        torque_std: on each measured joint torque (N m), before the momentum observer.
+        velocity_std: on each measured joint velocity (rad/s), before the momentum observer.
+        bubble_point_std: on each coordinate of a bubble's reported contact point (m).
+
+    Draws come from generators seeded by the episode's seed (see ``docs/sensor_noise.md``
+    for the values of a real iiwa with bubbles).
+    """
+
+    torque_std: float = 0.0
+    velocity_std: float = 0.0
+    bubble_point_std: float = 0.0
+
+
+@dataclasses.dataclass
 class SceneFile:
     """One scene (see the module docstring for units and frames).
 
@@ -156,6 +174,7 @@ class SceneFile:
         friction: model instance name -> Coulomb friction (static = dynamic) given to every
             collision geometry of that model, replacing its file's (e.g. a table that must
             reproduce another simulator's combined object-ground friction).
+        sensor_noise: see :class:`SensorNoise`.
     """
 
     name: str = ""
@@ -184,6 +203,7 @@ class SceneFile:
     tracker_preset: str = "sim"
     tracker: dict[str, float] = dataclasses.field(default_factory=dict)
     friction: dict[str, float] = dataclasses.field(default_factory=dict)
+    sensor_noise: SensorNoise = dataclasses.field(default_factory=SensorNoise)
 
     def tracker_params(self) -> SoftTrackingParams:
         """The tracker parameters: ``tracker`` overrides on top of ``tracker_preset``."""
@@ -282,6 +302,8 @@ def _check(scene: SceneFile) -> None:
     need(scene.action_duration > 0, "action_duration", "must be > 0")
     for name, mu in scene.friction.items():
         need(math.isfinite(mu) and mu >= 0, f"friction.{name}", f"must be >= 0, got {mu}")
+    for key, std in dataclasses.asdict(scene.sensor_noise).items():
+        need(math.isfinite(std) and std >= 0, f"sensor_noise.{key}", f"must be >= 0, got {std}")
     plant = scene.plant
     need(plant.time_step > 0, "plant.time_step", "the plant must be discrete (> 0)")
     # Drake checks these only when the plant is built; a scene file should fail on loading.
