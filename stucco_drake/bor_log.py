@@ -284,10 +284,11 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
     return grasp_at_pose(built, simulator, pose, clutter, shape)
 
 
-def grasp_success(log: EpisodeLog, tracker, scene: str | None = None) -> bool:
+def grasp_success(log: EpisodeLog, tracker, scene: str | None = None,
+                  estimator: str = "rules") -> bool:
     """The ``grasp`` hook of :func:`stucco_drake.eval.replay.replay` for Drake logs (``scene``
-    as :func:`grasp_from_log`'s)."""
-    result = grasp_from_log(log, tracker, scene)
+    and ``estimator`` as :func:`grasp_from_log`'s)."""
+    result = grasp_from_log(log, tracker, scene, estimator)
     return bool(result is not None and result.success)
 
 

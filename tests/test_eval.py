@@ -310,6 +310,12 @@ def test_a_table_folder_refuses_rows_of_another_setting(tmp_path):
         with pytest.raises(ValueError, match=r"--filter-stream 0, not 2"):
             make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
                        filter_stream=2)
+        with pytest.raises(ValueError, match=r"--target-estimator rules, not hypotheses"):
+            make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
+                       target_estimator="hypotheses")
+        with pytest.raises(ValueError, match=r"target_estimator: expected one of"):
+            make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,
+                       target_estimator="best")
         longer = SoftTrackingParams.from_mapping({"length": 0.04})
         with pytest.raises(ValueError, match=r"STUCCO's length = 0.02, not 0.04"):
             make_table(["SYN2"], ["dbscan"], 1, tmp_path, executor, progress=False,

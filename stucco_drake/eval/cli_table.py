@@ -88,21 +88,28 @@ def replay_penetration(source: EpisodeSource, log: EpisodeLog, method: str, dx_m
 #: Stream K of a table seeds every tracker's generator with the episode's seed + K times this
 #: (stream 0, the default, with the episode's seed itself).
 STREAM_STRIDE = 1000
+#: Where a table's grasps are made (see :func:`~stucco_drake.bor_log.grasp_from_log`).
+TARGET_ESTIMATORS = ("rules", "hypotheses")
 
 
 def replay_cached(task: tuple[str, int, str], out: str, sources: Sources,
                   dx_model: str = "ee", stucco_params: SoftTrackingParams | None = None,
-                  filter_stream: int = 0) -> dict:  # fmt: skip
+                  filter_stream: int = 0, target_estimator: str = "rules") -> dict:  # fmt: skip
     """One run (scene, seed, method) replayed from its cached log, with the scene source's
     pxpen and grasp, contact motion ``dx_model``, for STUCCO ``stucco_params`` (None: the
     paper's Table I), and the trackers' generator seeded by ``filter_stream`` (see
-    :data:`STREAM_STRIDE`) (runs in a worker)."""
+    :data:`STREAM_STRIDE`); the grasp at ``target_estimator``'s estimate (``"rules"``, Table
+    II's, or ``"hypotheses"``; see :func:`~stucco_drake.bor_log.grasp_from_log`) (runs in a
+    worker)."""
     scene, seed, method = task
     log, source = load_cached_log(out, scene, seed), sources[scene]
     penetration = replay_penetration(source, log, method, dx_model)
     params = stucco_params if method == "stucco" else None
+    grasp = source.grasp
+    if grasp is not None and target_estimator != "rules":
+        grasp = functools.partial(grasp, estimator=target_estimator)
     return replay(log, method, seed=seed + STREAM_STRIDE * filter_stream, params=params,
-                  penetration=penetration, grasp=source.grasp, dx_model=dx_model)
+                  penetration=penetration, grasp=grasp, dx_model=dx_model)
 
 
 def simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
@@ -137,9 +144,10 @@ TABLE_CONFIG = "table_config.yaml"
 
 
 def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingParams | None,
-                       filter_stream: int = 0) -> None:  # fmt: skip
+                       filter_stream: int = 0, target_estimator: str = "rules") -> None:
     """Records in ``OUT/table_config.yaml`` the contact motion, STUCCO's full parameters
-    (Table I when None) and the filter stream the rows of ``out`` are made with, or, when the
+    (Table I when None), the filter stream and the target estimator of the grasps the rows
+    of ``out`` are made with, or, when the
     file exists, checks that they are the same: rows are keyed by scene, seed and method
     only, so rows of two settings in one folder would pass for each other. ValueError naming
     the first setting that differs."""
@@ -148,7 +156,8 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
 
     params = stucco_params if stucco_params is not None else SoftTrackingParams.sim()
     config = plain({"dx_model": dx_model, "stucco_params": params.to_mapping(),
-                    "filter_stream": int(filter_stream)})  # fmt: skip
+                    "filter_stream": int(filter_stream),
+                    "target_estimator": target_estimator})  # fmt: skip
     path = Path(out) / TABLE_CONFIG
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -163,11 +172,13 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
             or not set(recorded) <= set(config)
             or not isinstance(recorded["stucco_params"], dict)):  # fmt: skip
         raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params"
-                         f" and optionally filter_stream)")
+                         f" and optionally filter_stream, target_estimator)")
     # What a file written before a setting existed lacks counts at that setting's default.
     old_params = {**plain(SoftTrackingParams.sim().to_mapping()), **recorded["stucco_params"]}
     settings = [("--dx-model ", recorded["dx_model"], dx_model),
-                ("--filter-stream ", recorded.get("filter_stream", 0), config["filter_stream"])]
+                ("--filter-stream ", recorded.get("filter_stream", 0), config["filter_stream"]),
+                ("--target-estimator ", recorded.get("target_estimator", "rules"),
+                 target_estimator)]
     settings += [(f"STUCCO's {name} = ", repr(old_params[name]), repr(value))
                  for name, value in config["stucco_params"].items()]  # fmt: skip
     for label, old, new in settings:
@@ -187,6 +198,7 @@ def make_table(
     dx_model: str = "ee",
     stucco_params: SoftTrackingParams | None = None,
     filter_stream: int = 0,
+    target_estimator: str = "rules",
 ) -> list[dict]:
     """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
 
@@ -194,7 +206,8 @@ def make_table(
     method moves contact points (see :func:`~stucco_drake.eval.replay.replay`) and
     ``stucco_params`` STUCCO's parameters (None: Table I) and ``filter_stream`` which draws
     the trackers take (0: seeded with the episode's seed, as the paper's tables; K: another
-    stream of draws on the same episodes, see :data:`STREAM_STRIDE`). Rows are keyed by
+    stream of draws on the same episodes, see :data:`STREAM_STRIDE`); ``target_estimator``
+    where the grasps are made (see :func:`replay_cached`). Rows are keyed by
     scene, seed and method only, so an OUT folder holds one of each: :func:`check_table_config`
     refuses another setting in a folder that holds one. Returns the table's rows (from
     ``OUT/runs.csv``, including runs of earlier calls).
@@ -205,11 +218,15 @@ def make_table(
     if filter_stream < 0:
         raise ValueError(f"filter_stream must be 0 or more, got {filter_stream}")
     out = Path(out)
-    check_table_config(out, dx_model, stucco_params, filter_stream)
+    if target_estimator not in TARGET_ESTIMATORS:
+        raise ValueError(f"target_estimator: expected one of {TARGET_ESTIMATORS}, "
+                         f"got {target_estimator!r}")
+    check_table_config(out, dx_model, stucco_params, filter_stream, target_estimator)
     results = RunResults(out / "runs.csv")
     replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources),
                                     dx_model=dx_model, stucco_params=stucco_params,
-                                    filter_stream=filter_stream)
+                                    filter_stream=filter_stream,
+                                    target_estimator=target_estimator)
     wanted = {(scene, seed, method) for seed in range(runs) for scene in scenes
               for method in methods}  # fmt: skip
 
@@ -254,6 +271,10 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
                        help="seed the trackers with the episode's seed + K x "
                             f"{STREAM_STRIDE} (default 0: the episode's seed); another K "
                             "replays the same episodes with other draws")
+    table.add_argument("--target-estimator", choices=TARGET_ESTIMATORS, default="rules",
+                       help="where the grasps are made: 'rules' (Table II's segment "
+                            "selection) or 'hypotheses' (the grasp chosen across weighted "
+                            "pose hypotheses)")
     table.add_argument("--workers", type=positive_int, default=None,
                        help="parallel workers (default: one per CPU)")
     table.add_argument("--executor", choices=("process", "dask"), default="process",
@@ -282,7 +303,8 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
     out = prepare_output_folder("--out", args.out)
     try:
         # OUT's rows of other settings, or a runs file of another version, are refused now.
-        check_table_config(out, args.dx_model, stucco_params, args.filter_stream)
+        check_table_config(out, args.dx_model, stucco_params, args.filter_stream,
+                           args.target_estimator)
         RunResults(out / "runs.csv").rows()
         executor = make_executor(args.executor, args.workers, args.scheduler)
     except (ValueError, RuntimeError) as error:  # RuntimeError: the Dask executor without Dask
@@ -293,7 +315,8 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
             rows = make_table(scenes, args.methods, args.runs, out, executor,
                               sources=sources, dx_model=args.dx_model,
                               stucco_params=stucco_params,
-                              filter_stream=args.filter_stream)
+                              filter_stream=args.filter_stream,
+                              target_estimator=args.target_estimator)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1
