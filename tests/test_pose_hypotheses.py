@@ -102,6 +102,13 @@ def test_no_group_to_fit_is_a_one_line_error():
         pose_hypotheses(np.random.default_rng(0), points, np.array([0, 0]), BOX)
 
 
+def test_a_segment_no_placement_can_touch_gives_no_hypotheses():
+    # Three points of one segment, 40 cm apart: wider than the box (18 cm across its
+    # diagonal), so no piece or placement holds three of them.
+    points = np.array([[0.0, 0.0, HEIGHT], [0.4, 0.0, HEIGHT], [0.8, 0.0, HEIGHT]])
+    assert pose_hypotheses(np.random.default_rng(0), points, np.zeros(3, dtype=int), BOX) is None
+
+
 def test_outline_error_is_zero_for_symmetric_turns_and_the_shift_otherwise():
     from stucco_drake.core.shapes import CylinderSdf
     from stucco_drake.eval.target_estimates import outline_error

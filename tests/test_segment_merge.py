@@ -8,7 +8,7 @@ from stucco_drake.core import BoxSdf, CylinderSdf
 from stucco_drake.core.icp import transform
 from stucco_drake.core.segment_extent import outline_extent, split_wider_segments, xy_extent
 from stucco_drake.core.segmentation import connected_components
-from stucco_drake.core.target_pose import estimate_target_pose
+from stucco_drake.core.target_pose import NoSegmentToFit, estimate_target_pose
 
 #: The BC target cracker box (half extents, m).
 CRACKER = BoxSdf((0.0329, 0.079, 0.1037))
@@ -241,3 +241,13 @@ def test_paper_rule_never_splits():
         np.random.default_rng(0), TC_TARGET_AND_CAN, labels, TOMATO, selection="paper"
     )
     assert estimate.labels.tolist() == labels.tolist() and len(estimate.segments) == 1
+
+
+def test_a_segment_wider_than_the_target_in_small_pieces_has_nothing_to_fit():
+    # One segment of four points 40 cm apart: wider than the cracker box (17 cm across its diagonal), so it
+    # is split, and no piece holds three points. The live estimator keeps its last estimate
+    # on this error; a log's grasp gets no estimate.
+    points = np.array([[0.4 * k, 0.0, 0.1] for k in range(4)])
+    with pytest.raises(NoSegmentToFit, match="no segment has at least 3 points"):
+        estimate_target_pose(np.random.default_rng(0), points, np.zeros(4, dtype=int), CRACKER,
+                             min_points=3)

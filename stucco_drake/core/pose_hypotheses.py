@@ -200,6 +200,8 @@ def grid_candidates(points, sigma, shape, params: HypothesisParams) -> np.ndarra
     centres = centres[nearby >= params.min_explained]
     grid = np.column_stack([np.repeat(centres, len(yaws), axis=0),
                             np.tile(yaws, len(centres))])  # fmt: skip
+    if len(grid) == 0:
+        return grid
     block = max(1, (1 << 21) // len(points))  # bounded memory: poses x points per block
     costs = np.concatenate([contact_costs(grid[k:k + block], points, sigma, shape, params)[0]
                             for k in range(0, len(grid), block)])  # fmt: skip
@@ -271,7 +273,8 @@ def _distinct(poses, shape, outline, resolution: float) -> np.ndarray:
 
 def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
                     *, spread=None, free_space: FreeSpace | None = None,
-                    params: HypothesisParams = HypothesisParams()) -> PoseHypotheses:  # fmt: skip
+                    params: HypothesisParams = HypothesisParams(),
+                    ) -> PoseHypotheses | None:  # fmt: skip
     """Weighted target-pose hypotheses from tracked contact points (see the module).
 
     Args:
@@ -284,8 +287,12 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
         free_space: where the robot has been (None: contact evidence only).
         params: the settings.
 
+    Returns:
+        The hypotheses, or None when no placement of the target can touch ``min_explained``
+        points (a segment's points lie farther apart than the target could span).
+
     Raises:
-        ValueError: naming the argument, e.g. no group with enough points to fit.
+        ValueError: naming the argument, e.g. no segment with ``min_explained`` points.
     """
     points = as_finite_array(points, "points", (None, 3))
     labels = np.asarray(labels)
@@ -295,9 +302,9 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
         spread, "spread", (len(points),))  # fmt: skip
     sigma = np.sqrt(params.contact_noise**2 + spread**2)
     reach = outline_extent(shape) + 3.0 * params.contact_noise
-    groups = _proposal_groups(points, labels, reach, params.min_explained)
-    if not groups:
+    if np.bincount(labels[labels >= 0], minlength=1).max() < params.min_explained:
         raise ValueError(f"labels: no segment has at least {params.min_explained} points")
+    groups = _proposal_groups(points, labels, reach, params.min_explained)
     outline = sample_outline(shape, params.outline_spacing)
     # Hypotheses are compared on a coarser outline, and count as one within its spacing.
     coarse = sample_outline(shape, params.fill_spacing)
@@ -321,8 +328,10 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
         return poses, costs, explained
 
     fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
-    poses, costs, _ = scored(np.concatenate([*fits, grid_candidates(points, sigma, shape,
-                                                                    params)]))  # fmt: skip
+    candidates = np.concatenate([*fits, grid_candidates(points, sigma, shape, params)])
+    if len(candidates) == 0:
+        return None
+    poses, costs, _ = scored(candidates)
     best = poses[np.argsort(costs, kind="stable")[:params.n_polish]]
     poses, costs, explained = scored(np.concatenate(
         [poses, _polish(rng, best, points, sigma, shape, outline, params)]))

@@ -33,6 +33,10 @@ SELECTIONS = ("shape", "paper")
 TOUCH_TOLERANCE = 0.01
 
 
+class NoSegmentToFit(ValueError):
+    """No segment (nor part of one narrower than the target) holds enough points to fit."""
+
+
 @dataclasses.dataclass(frozen=True)
 class SegmentReport:
     """ICP summary of one segment, or of the union of two.
@@ -354,7 +358,7 @@ def estimate_target_pose(
         # The model is posed at the segment's mean contact height for the penetration check.
         fits[members] = (spread, result, float(group[:, 2].mean()), (*sse, len(group)))
     if not fits:
-        raise ValueError(f"labels: no segment has at least {min_points} points")
+        raise NoSegmentToFit(f"labels: no segment has at least {min_points} points")
     fitted = [members for members in singles if members in fits]
     # One noise model for the whole estimate: the sensor's, pooled over the segments.
     sums = [fits[m][3] for m in fitted]

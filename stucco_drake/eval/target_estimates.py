@@ -23,7 +23,7 @@ from stucco_drake.core.pose_hypotheses import (
     tracker_spread,
 )
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
-from stucco_drake.core.target_pose import TargetPoseEstimate, estimate_target_pose
+from stucco_drake.core.target_pose import NoSegmentToFit, TargetPoseEstimate, estimate_target_pose
 from stucco_drake.eval.episode_log import EpisodeLog, shape_sdf
 
 #: Fewest points of a segment for a pose fit (three pin a planar pose).
@@ -47,15 +47,18 @@ def rules_estimate(rng, log: EpisodeLog, tracker, shape,
                    penetration: RobotPenetration) -> TargetPoseEstimate | None:  # fmt: skip
     """The segment-selection estimate the Table II grasp uses (30 restarts, the robot's pxpen at
     the configs since the chosen segment was last touched), or None when no segment has
-    :data:`MIN_SEGMENT_POINTS` points."""
+    :data:`MIN_SEGMENT_POINTS` points (nor a part narrower than the target)."""
     points, labels = tracker.map_points(), np.asarray(tracker.segment())
     if np.bincount(labels[labels >= 0], minlength=1).max() < MIN_SEGMENT_POINTS:
         return None
-    return estimate_target_pose(
-        rng, points, labels, shape, penetration, log.ee_position, log.ee_rotation[-1],
-        min_points=MIN_SEGMENT_POINTS, penetration_configs="since_touch",
-        point_steps=point_steps(log),
-    )  # fmt: skip
+    try:
+        return estimate_target_pose(
+            rng, points, labels, shape, penetration, log.ee_position, log.ee_rotation[-1],
+            min_points=MIN_SEGMENT_POINTS, penetration_configs="since_touch",
+            point_steps=point_steps(log),
+        )  # fmt: skip
+    except NoSegmentToFit:  # segments wider than the target, in pieces too small to fit
+        return None
 
 
 def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: RobotPenetration,

@@ -16,6 +16,7 @@ from stucco_drake.core.pose_hypotheses import FreeSpace, HypothesisParams, pose_
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.target_pose import (
     TOUCH_TOLERANCE,
+    NoSegmentToFit,
     TargetPoseEstimate,
     estimate_target_pose,
 )
@@ -178,20 +179,23 @@ class TargetPoseEstimator(LeafSystem):
         enough = len(labels) and np.bincount(labels[labels >= 0]).max(initial=0) >= 3
         if len(contacts.points) and enough:
             previous = current.estimate
-            updated.estimate = estimate_target_pose(
-                updated.rng,
-                points,
-                labels,
-                self.target_shape,
-                self.penetration,
-                updated.config_positions,
-                self._ee_pose.Eval(context).rotation().matrix(),
-                n_restarts=self.n_restarts,
-                initial_pose=None if previous is None else previous.pose,
-                penetration_configs=self.penetration_configs,
-                point_steps=updated.point_steps,
-                touch_tolerance=self.touch_tolerance,
-            )
+            try:
+                updated.estimate = estimate_target_pose(
+                    updated.rng,
+                    points,
+                    labels,
+                    self.target_shape,
+                    self.penetration,
+                    updated.config_positions,
+                    self._ee_pose.Eval(context).rotation().matrix(),
+                    n_restarts=self.n_restarts,
+                    initial_pose=None if previous is None else previous.pose,
+                    penetration_configs=self.penetration_configs,
+                    point_steps=updated.point_steps,
+                    touch_tolerance=self.touch_tolerance,
+                )
+            except NoSegmentToFit:
+                pass  # every segment is wider than the target, in pieces too small: keep the last
         state.get_mutable_abstract_state(int(self._state)).set_value(updated)
 
     def _calc_pose(self, context, output):
