@@ -244,9 +244,9 @@ def test_paper_rule_never_splits():
 
 
 def test_a_segment_wider_than_the_target_in_small_pieces_has_nothing_to_fit():
-    # One segment of four points 40 cm apart: wider than the cracker box (17 cm across its diagonal), so it
-    # is split, and no piece holds three points. The live estimator keeps its last estimate
-    # on this error; a log's grasp gets no estimate.
+    # One segment of four points 40 cm apart: wider than the cracker box (17 cm across its
+    # diagonal), so it is split, and no piece holds three points. The live estimator keeps
+    # its last estimate on this error; a log's grasp gets no estimate.
     points = np.array([[0.4 * k, 0.0, 0.1] for k in range(4)])
     with pytest.raises(NoSegmentToFit, match="no segment has at least 3 points"):
         estimate_target_pose(np.random.default_rng(0), points, np.zeros(4, dtype=int), CRACKER,
