@@ -34,7 +34,7 @@ from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sets import PAPER_SCENES, scene_set
 from stucco_drake.eval.sources import EpisodeSource
 from stucco_drake.eval.target_estimates import hypotheses_estimate, rules_estimate
-from stucco_drake.grasp import build_grasp_scene, grasp_at_pose
+from stucco_drake.grasp import build_grasp_scene, estimate_clutter, grasp_at_pose
 from stucco_drake.gripper_sdf import gripper_penetration
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene, resolve_scene_path, scene_paths
 from stucco_drake.scenes.builder import yaw_of
@@ -264,9 +264,7 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
         estimate = rules_estimate(rng, log, tracker, shape, log_penetration(log))
         if estimate is None:
             return None
-        pose = np.array([estimate.x, estimate.y, estimate.yaw])
-        clutter = np.delete(points, np.flatnonzero(np.isin(estimate.labels, estimate.members)),
-                            axis=0)  # fmt: skip
+        pose, clutter = estimate.pose, estimate_clutter(estimate, points)
     elif estimator == "hypotheses":
         found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log))
         if found is None:

@@ -190,16 +190,21 @@ def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
     return execute_grasp(built, simulator, (x, y, yaw), target_shape, cylinder_yaws=yaws)
 
 
+def estimate_clutter(estimate, points) -> np.ndarray:
+    """The tracked ``points`` ((n, 3) m, world, oldest first) outside the segments a
+    :class:`~stucco_drake.core.target_pose.TargetPoseEstimate` fitted (by its ``labels`` and
+    ``members``)."""
+    # Points sensed after the estimate was made (a live estimate is not remade when no
+    # segment has enough points) lie beyond its labels and were not fitted: they stay.
+    return np.delete(points, np.flatnonzero(np.isin(estimate.labels, estimate.members)), axis=0)
+
+
 def grasp_estimate(built: BuiltScene, simulator: Simulator, estimate, points,
                    target_shape) -> GraspResult:
     """:func:`grasp_at_pose` at a :class:`~stucco_drake.core.target_pose.TargetPoseEstimate`,
-    the clutter being the tracked ``points`` ((n, 3) m, world, oldest first) outside the
-    segments it fitted (by its ``labels`` and ``members``)."""
-    # Points sensed after the estimate was made (a live estimate is not remade when no
-    # segment has enough points) lie beyond its labels and were not fitted: they stay.
-    fitted = np.flatnonzero(np.isin(estimate.labels, estimate.members))
+    the clutter being :func:`estimate_clutter`'s."""
     return grasp_at_pose(built, simulator, (estimate.x, estimate.y, estimate.yaw),
-                         np.delete(points, fitted, axis=0), target_shape)  # fmt: skip
+                         estimate_clutter(estimate, points), target_shape)  # fmt: skip
 
 
 def _grasp_context(built: BuiltScene, simulator: Simulator):

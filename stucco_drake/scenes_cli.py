@@ -62,21 +62,18 @@ def add_scenes_command(subparsers) -> None:
 
 
 def run_noise(args: argparse.Namespace) -> int:
-    """Handler of ``stucco-drake scenes noise``: 0 written, 2 bad input."""
-    from stucco_drake.inputs import InputError
+    """Handler of ``stucco-drake scenes noise``: 0 written; a bad input raises InputError (the
+    CLI's main reports it), before anything is written."""
     from stucco_drake.scenes import load_scene
     from stucco_drake.scenes.scene_file import SensorNoise
-    from stucco_drake.scenes.sensor_noise import write_noisy_scene
+    from stucco_drake.scenes.sensor_noise import with_sensor_noise, write_noisy_scene
 
     noise = SensorNoise(args.torque_std, args.velocity_std, args.bubble_std)
-    if not min(args.torque_std, args.velocity_std, args.bubble_std) >= 0:
-        raise InputError(f"noise must be >= 0, got {noise}")
-    scenes = [load_scene(name) for name in args.scenes]  # all read before any is written
+    scenes = [load_scene(name) for name in args.scenes]
+    for scene in scenes:  # every copy is checked before any is written
+        with_sensor_noise(scene, noise)
     for scene in scenes:
-        try:
-            print(write_noisy_scene(scene, args.out, noise))
-        except ValueError as error:
-            raise InputError(str(error)) from None
+        print(write_noisy_scene(scene, args.out, noise))
     return 0
 
 

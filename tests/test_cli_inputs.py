@@ -115,7 +115,7 @@ BAD_INPUTS = {
                                "--scheduler needs --executor dask"),
     "missing option": ("table --scenes SYN2", "required: --out"),
     "noise < 0": ("scenes noise --scenes FB --bubble-std -0.001 --out {tmp}/n",
-                  "noise must be >= 0"),
+                  "FB-noise: sensor_noise.bubble_point_std: must be >= 0, got -0.001"),
     # Input files.
     "model file missing": ("sim --scene {tmp}/no_model.yaml", "no_model.yaml: directives[",
                            "].add_model.file: ", "999_cracker_box_10kg.sdf", "does not exist"),

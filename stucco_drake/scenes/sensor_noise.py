@@ -12,6 +12,7 @@ from pathlib import Path
 
 from pydrake.common.yaml import yaml_dump_typed
 
+from stucco_drake.inputs import InputError
 from stucco_drake.scenes.scene_file import SceneFile, SensorNoise, load_scene_text
 
 #: Joint-torque noise matching the free-space wrench noise the authors measured on their real
@@ -25,21 +26,18 @@ def noisy_name(name: str) -> str:
 
 
 def with_sensor_noise(scene: SceneFile, noise: SensorNoise = REAL_IIWA) -> SceneFile:
-    """A copy of ``scene`` named :func:`noisy_name` whose senses have ``noise``."""
-    if min(dataclasses.astuple(noise)) < 0:
-        raise ValueError(f"sensor noise must be >= 0, got {noise}")
-    copy = load_scene_text(yaml_dump_typed(scene), where=scene.name)  # a deep copy
-    copy.name = noisy_name(scene.name)
-    copy.sensor_noise = noise
-    copy.description = f"{scene.description} (noisy sensing)".lstrip()
-    return copy
+    """A copy of ``scene`` named :func:`noisy_name` whose senses have ``noise``, checked as a
+    scene file is (SceneFileError, e.g. for a negative noise)."""
+    copy = dataclasses.replace(scene, name=noisy_name(scene.name), sensor_noise=noise,
+                               description=f"{scene.description} (noisy sensing)".lstrip())
+    return load_scene_text(yaml_dump_typed(copy), where=copy.name)  # a deep, checked copy
 
 
 def write_noisy_scene(scene: SceneFile, out: str | Path,
                       noise: SensorNoise = REAL_IIWA) -> Path:  # fmt: skip
     """Writes :func:`with_sensor_noise` of ``scene`` to ``out/<name>.yaml`` (a header saying
     what it is, then the YAML); returns the path. An existing different file is refused
-    (ValueError): the table keys its logs by scene name."""
+    (InputError): the table keys its logs by scene name."""
     noisy = with_sensor_noise(scene, noise)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -48,6 +46,6 @@ def write_noisy_scene(scene: SceneFile, out: str | Path,
               f"sensor_noise; docs/sensor_noise.md gives the figures' sources.\n")
     path, text = out / f"{noisy.name}.yaml", header + yaml_dump_typed(noisy)
     if path.exists() and path.read_text(encoding="utf-8") != text:
-        raise ValueError(f"{path} exists and holds another scene; use another --out")
+        raise InputError(f"{path} exists and holds another scene; use another --out")
     path.write_text(text, encoding="utf-8")
     return path
