@@ -19,12 +19,12 @@ PACKAGE_NAME = "stucco_drake_models"
 
 
 def _find_models_dir() -> Path:
-    """The repository's ``models/`` folder, else a ``models/`` folder shipped inside the package."""
+    """The repository's ``models/`` folder, else its copy shipped in the wheel (``_models``)."""
     here = Path(__file__).resolve().parent
     source_tree = here.parent / "models"
     if (source_tree / "package.xml").is_file():
         return source_tree
-    return here / "models"
+    return here / "_models"
 
 
 MODELS_DIR: Path = _find_models_dir()

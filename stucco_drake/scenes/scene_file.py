@@ -25,8 +25,18 @@ from stucco_drake.core import SoftTrackingParams
 from stucco_drake.inputs import InputError
 from stucco_drake.models import resolve_model_url
 
+
+def _find_diagrams_dir() -> Path:
+    """The repository's ``diagrams/`` folder, else its copy shipped in the wheel."""
+    package = Path(__file__).resolve().parents[1]
+    source_tree = package.parent / "diagrams"
+    if (source_tree / "FB.yaml").is_file():
+        return source_tree
+    return package / "_diagrams"
+
+
 #: Folder of the shipped scene files, one ``<name>.yaml`` per scene.
-DIAGRAMS_DIR = Path(__file__).resolve().parents[2] / "diagrams"
+DIAGRAMS_DIR = _find_diagrams_dir()
 
 
 _CONTACT_MODELS = ("hydroelastic_with_fallback", "hydroelastic", "point")
