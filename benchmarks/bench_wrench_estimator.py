@@ -23,6 +23,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
+from stucco_drake.models import iiwa_observed_robot_arguments
 from stucco_drake.systems.contact_detector import (
     FINGERS_NOMINAL,
     Q_NOMINAL,
@@ -30,9 +31,15 @@ from stucco_drake.systems.contact_detector import (
     add_joint_controlled_robot,
     random_joint_trajectory,
 )
+from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
 
 H = 1e-3
+
+
+def iiwa(fingers=None, X_WB=None) -> ObservedRobot:
+    """Our iiwa as the estimator's robot model: arm joints observed, fingers held."""
+    return ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))
 
 
 def per_call_us(fn, n: int, repeats: int = 5) -> float:
@@ -51,7 +58,7 @@ def per_call_us(fn, n: int, repeats: int = 5) -> float:
 
 def bench_update(n: int, noisy: bool) -> tuple[float, float]:
     kwargs = dict(torque_noise_std=0.1, velocity_noise_std=1e-3, noise_seed=0) if noisy else {}
-    est = ExternalWrenchEstimator(H, finger_positions=FINGERS_NOMINAL, **kwargs)
+    est = ExternalWrenchEstimator(H, iiwa(FINGERS_NOMINAL), **kwargs)
     context = est.CreateDefaultContext()
     rng = np.random.default_rng(0)
     est.GetInputPort("state").FixValue(context, np.r_[Q_NOMINAL, 0.1 * rng.normal(size=7)])
@@ -69,7 +76,7 @@ def bench_update(n: int, noisy: bool) -> tuple[float, float]:
 
 
 def bench_parts(n: int) -> dict[str, float]:
-    est = ExternalWrenchEstimator(H)
+    est = ExternalWrenchEstimator(H, iiwa())
     plant = est.robot_plant
     ctx = plant.CreateDefaultContext()
     x = np.r_[Q_NOMINAL, FINGERS_NOMINAL, 0.1 * np.ones(9)]

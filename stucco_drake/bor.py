@@ -31,6 +31,7 @@ from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.grasp import build_grasp_scene
 from stucco_drake.gripper_sdf import gripper_penetration
+from stucco_drake.models import IIWA_ARM_JOINTS, iiwa_observed_robot_arguments
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.action_contacts_assembler import (
@@ -46,9 +47,10 @@ from stucco_drake.systems.contact_detector import (
 )
 from stucco_drake.systems.contact_isolator import ContactIsolator, GripperPoseFromState
 from stucco_drake.systems.contact_tracking_visualizer import ContactTrackingVisualizer
+from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
 from stucco_drake.systems.target_pose_estimator import TargetPoseEstimator
-from stucco_drake.systems.wrench_estimator import N_ARM, ExternalWrenchEstimator
+from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
 
 
 @dataclasses.dataclass
@@ -238,6 +240,7 @@ def _arm_selectors(robot_plant: MultibodyPlant):
     """(S, T): arm state [q; v] (14) = S x_robot, arm torques (7) = T tau_robot."""
     arm = robot_plant.GetModelInstanceByName(IIWA)
     nq, nv = robot_plant.num_positions(), robot_plant.num_velocities()
+    N_ARM = len(IIWA_ARM_JOINTS)
     S, T = np.zeros((2 * N_ARM, nq + nv)), np.zeros((N_ARM, nv))
     joints = [robot_plant.get_joint(j) for j in robot_plant.GetJointIndices(arm)]
     joints = sorted((j for j in joints if j.num_velocities() == 1), key=lambda j: j.name())
@@ -320,7 +323,8 @@ def build_bor_diagram(
     calibration = dict(observer, noise_seed=0) if "noise_seed" in observer else observer
     stats = calibrate_residual_statistics(time_step=h, estimator_kwargs=calibration)
     estimator = builder.AddNamedSystem("wrench_estimator", ExternalWrenchEstimator(
-        h, X_WB=X_WB, finger_positions=fingers, residual_statistics=stats,
+        h, ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers)),
+        residual_statistics=stats,
         # The scene's ports decide which torque goes with which state (estimator's Timing).
         sampled_plant_outputs=bool(scene.plant.use_sampled_output_ports), **observer,
     ))  # fmt: skip
@@ -341,7 +345,8 @@ def build_bor_diagram(
     builder.Connect(action_index, detector.GetInputPort("action_index"))
 
     pose = builder.AddNamedSystem(
-        "gripper_pose", GripperPoseFromState(X_WB=X_WB, finger_positions=fingers)
+        "gripper_pose",
+        GripperPoseFromState(ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))),
     )
     builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
     bubbles = builder.AddNamedSystem(

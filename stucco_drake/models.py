@@ -12,7 +12,10 @@ from __future__ import annotations
 
 from pathlib import Path, PurePosixPath
 
+import numpy as np
+from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import PackageMap, Parser
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex
 
 PACKAGE_NAME = "stucco_drake_models"
@@ -126,3 +129,35 @@ directives:
     parser.AddModelsFromString(directives, "dmd.yaml")
     plant = parser.plant()
     return plant.GetModelInstanceByName(a), plant.GetModelInstanceByName(g)
+
+
+#: Generalized coordinates of the iiwa's seven arm joints in :func:`iiwa_robot_plant` (the
+#: gripper's two finger joints follow).
+IIWA_ARM_JOINTS = tuple(range(7))
+
+
+def iiwa_robot_plant(X_WB: RigidTransform | None = None) -> MultibodyPlant:
+    """A continuous, finalized plant of the iiwa14 + bubble gripper alone, base welded at X_WB.
+
+    The robot model the proprioceptive systems read (no objects). Its arm coordinates come
+    first (:data:`IIWA_ARM_JOINTS`), then the two finger joints (m).
+    """
+    plant = MultibodyPlant(0.0)
+    iiwa, _ = add_iiwa14_with_bubble_gripper(configure_parser(Parser(plant)))
+    base = plant.GetFrameByName("iiwa_link_0", iiwa)
+    plant.WeldFrames(plant.world_frame(), base, X_WB if X_WB is not None else RigidTransform())
+    plant.Finalize()
+    return plant
+
+
+def iiwa_observed_robot_arguments(X_WB: RigidTransform | None = None,
+                                  finger_positions=None) -> dict:  # fmt: skip
+    """Arguments of ``ObservedRobot`` for our iiwa: its robot plant (base at X_WB), the
+    ``gripper_frame``, the arm joints observed and the fingers held at ``finger_positions``
+    ((2,) m, [right, left]; default the model's)."""
+    plant = iiwa_robot_plant(X_WB)
+    positions = plant.GetPositions(plant.CreateDefaultContext())
+    if finger_positions is not None:
+        positions[len(IIWA_ARM_JOINTS):] = np.asarray(finger_positions, dtype=float).reshape(-1)
+    return {"plant": plant, "frame": plant.GetFrameByName("gripper_frame"),
+            "joints": IIWA_ARM_JOINTS, "positions": positions}  # fmt: skip

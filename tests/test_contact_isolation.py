@@ -27,7 +27,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 from pydrake.trajectories import PiecewisePolynomial
 
-from stucco_drake.models import BUBBLE_GRIPPER_URL, configure_parser
+from stucco_drake.models import BUBBLE_GRIPPER_URL, configure_parser, iiwa_observed_robot_arguments
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
 from stucco_drake.systems.contact_detector import (
     FINGERS_NOMINAL,
@@ -45,6 +45,7 @@ from stucco_drake.systems.contact_isolator import (
     pose_vector,
 )
 from stucco_drake.systems.gripper_samples import sample_gripper_surface
+from stucco_drake.systems.observed_robot import ObservedRobot
 
 H = 1e-3  # plant, estimator and detector period (s)
 ISO_H = 5e-3  # isolator period (s)
@@ -112,7 +113,8 @@ def run_rig(variants: dict, *, estimator_kwargs=None, statistics=None, windows=N
         kwargs["residual_statistics"] = statistics
     robot = add_joint_controlled_robot(builder, hold, time_step=H, estimator_kwargs=kwargs)
     plant, est = robot.plant, robot.estimator
-    fk = builder.AddSystem(GripperPoseFromState(finger_positions=FINGERS_NOMINAL))
+    fk = builder.AddSystem(GripperPoseFromState(
+        ObservedRobot(**iiwa_observed_robot_arguments(finger_positions=FINGERS_NOMINAL))))
     builder.Connect(plant.get_state_output_port(plant.GetModelInstanceByName("iiwa")),
                     fk.get_input_port())  # fmt: skip
     context = plant.CreateDefaultContext()

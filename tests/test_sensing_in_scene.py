@@ -36,6 +36,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
 from stucco_drake.bor import _arm_selectors
+from stucco_drake.models import iiwa_observed_robot_arguments
 from stucco_drake.scenes import build_scene, load_scene_text
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
@@ -50,6 +51,7 @@ from stucco_drake.systems.contact_isolator import (
     ContactIsolator,
     GripperPoseFromState,
 )
+from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
 
 GAIN = 50.0  # observer bandwidth (1/s), bor's default
@@ -187,7 +189,8 @@ def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     stats = calibrate_residual_statistics(time_step=h, estimator_kwargs={"gain": GAIN},
                                           cache_dir=cache_dir)  # fmt: skip
     estimator = builder.AddSystem(ExternalWrenchEstimator(
-        h, gain=GAIN, X_WB=X_WB, finger_positions=fingers, residual_statistics=stats,
+        h, ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers)), gain=GAIN,
+        residual_statistics=stats,
         sampled_plant_outputs=bool(scene.plant.use_sampled_output_ports),
     ))  # fmt: skip
     builder.Connect(arm_state.get_output_port(), estimator.GetInputPort("state"))
@@ -196,7 +199,8 @@ def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     for name in ("residual_chi2", "ee_position"):
         builder.Connect(estimator.GetOutputPort(name), detector.GetInputPort(name))
     builder.Connect(sub.GetOutputPort("action_index"), detector.GetInputPort("action_index"))
-    pose = builder.AddSystem(GripperPoseFromState(X_WB=X_WB, finger_positions=fingers))
+    pose = builder.AddSystem(GripperPoseFromState(
+        ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))))
     builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
     bubbles = builder.AddSystem(BubbleContactSensor(built.plant, built.scene_graph, h))
     builder.Connect(sub.GetOutputPort("contact_results"), bubbles.GetInputPort("contact_results"))

@@ -18,6 +18,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
 from stucco_drake.core.detection import ResidualStatistics
+from stucco_drake.models import iiwa_observed_robot_arguments
 from stucco_drake.systems.contact_detector import (
     FINGERS_NOMINAL,
     Q_NOMINAL,
@@ -27,6 +28,7 @@ from stucco_drake.systems.contact_detector import (
     default_threshold,
     random_joint_trajectory,
 )
+from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
 
 H = 1e-3  # plant and estimator period (s)
@@ -66,6 +68,11 @@ class ActionClock(LeafSystem):
         self.DeclareVectorOutputPort(
             "action_index", 1, lambda c, o: o.SetFromVector([np.floor(c.get_time() / period)])
         )
+
+
+def iiwa(fingers=None, X_WB=None) -> ObservedRobot:
+    """Our iiwa as the estimator's robot model: arm joints observed, fingers held."""
+    return ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))
 
 
 def push_windows(seed: int):
@@ -149,7 +156,7 @@ def exact_run():
 def steady_force_errors(run):
     """Relative error of the estimated force, and torque error (N·m), over each push's steady part
     (from 0.1 s after onset: five observer time constants)."""
-    plant = ExternalWrenchEstimator(H).robot_plant  # only for the palm's orientation
+    plant = ExternalWrenchEstimator(H, iiwa()).robot_plant  # only for the palm's orientation
     context = plant.CreateDefaultContext()
     palm = plant.GetBodyByName("body")
     t, wrench, x = run["t"], run["ee_wrench"], run["iiwa_state"]
@@ -260,7 +267,7 @@ def holding_torque(estimator: ExternalWrenchEstimator) -> np.ndarray:
 
 def test_same_seed_same_output_with_noise():
     def run(seed):
-        est = ExternalWrenchEstimator(H, finger_positions=FINGERS_NOMINAL, noise_seed=seed, **NOISE)
+        est = ExternalWrenchEstimator(H, iiwa(FINGERS_NOMINAL), noise_seed=seed, **NOISE)
         return standalone(est, np.r_[Q_NOMINAL, np.zeros(7)], holding_torque(est))
 
     a, b, c = run(3), run(3), run(4)
@@ -270,14 +277,14 @@ def test_same_seed_same_output_with_noise():
 
 
 def test_at_rest_without_noise_residual_is_zero():
-    est = ExternalWrenchEstimator(H, finger_positions=FINGERS_NOMINAL)
+    est = ExternalWrenchEstimator(H, iiwa(FINGERS_NOMINAL))
     r = standalone(est, np.r_[Q_NOMINAL, np.zeros(7)], holding_torque(est), steps=50)
     assert np.abs(r).max() < 1e-9
 
 
 @pytest.mark.parametrize("port", ["state", "applied_torque"])
 def test_non_finite_input_raises_naming_the_port(port):
-    est = ExternalWrenchEstimator(H)
+    est = ExternalWrenchEstimator(H, iiwa())
     x, tau = np.r_[Q_NOMINAL, np.zeros(7)], holding_torque(est)
     if port == "state":
         x[9] = np.nan
@@ -290,8 +297,9 @@ def test_non_finite_input_raises_naming_the_port(port):
 
 def test_constructor_rejects_bad_settings():
     with pytest.raises(ValueError, match="gain"):
-        ExternalWrenchEstimator(H, gain=5000.0)
+        ExternalWrenchEstimator(H, iiwa(), gain=5000.0)
     with pytest.raises(ValueError, match="noise_seed"):
-        ExternalWrenchEstimator(H, torque_noise_std=0.1)
+        ExternalWrenchEstimator(H, iiwa(), torque_noise_std=0.1)
     with pytest.raises(ValueError, match="6-D"):
-        ExternalWrenchEstimator(H, residual_statistics=ResidualStatistics.isotropic([1.0] * 7))
+        ExternalWrenchEstimator(H, iiwa(),
+                                residual_statistics=ResidualStatistics.isotropic([1.0] * 7))

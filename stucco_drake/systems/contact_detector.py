@@ -43,9 +43,19 @@ from stucco_drake.core.detection import (
     chi2_threshold,
     fit_residual_statistics,
 )
-from stucco_drake.models import MODELS_DIR, add_iiwa14_with_bubble_gripper
+from stucco_drake.models import (
+    IIWA_ARM_JOINTS,
+    MODELS_DIR,
+    add_iiwa14_with_bubble_gripper,
+    iiwa_observed_robot_arguments,
+    iiwa_robot_plant,
+)
+from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.ports import eval_finite
-from stucco_drake.systems.wrench_estimator import N_ARM, ExternalWrenchEstimator, make_robot_plant
+from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
+
+#: The calibration rig's arm joints (our iiwa's seven).
+N_ARM = len(IIWA_ARM_JOINTS)
 
 #: Arm configuration (rad) with the gripper pointing straight down, 0.6 m in front of the base.
 Q_NOMINAL = np.array([0.0, 0.7, 0.0, -1.5, 0.0, 0.94, 0.0])
@@ -215,20 +225,17 @@ def add_joint_controlled_robot(
     gains = np.full(nv, kp)
     controller = builder.AddSystem(
         InverseDynamicsController(
-            make_robot_plant(X_WB), gains, np.ones(nv), 2 * np.sqrt(gains), False
+            iiwa_robot_plant(X_WB), gains, np.ones(nv), 2 * np.sqrt(gains), False
         )
     )
     source = builder.AddSystem(TrajectorySource(trajectory, output_derivative_order=1))
     builder.Connect(source.get_output_port(), controller.get_input_port_desired_state())
     builder.Connect(plant.get_state_output_port(), controller.get_input_port_estimated_state())
     builder.Connect(controller.get_output_port_control(), plant.get_actuation_input_port())
-    kwargs = {
-        "finger_positions": trajectory.value(0.0)[N_ARM:, 0],
-        "X_WB": X_WB,
-        "sampled_plant_outputs": use_sampled_output_ports,
-    }
-    kwargs.update(estimator_kwargs or {})
-    estimator = builder.AddSystem(ExternalWrenchEstimator(time_step, **kwargs))
+    robot = ObservedRobot(**iiwa_observed_robot_arguments(
+        X_WB, finger_positions=trajectory.value(0.0)[N_ARM:, 0]))  # fmt: skip
+    kwargs = {"sampled_plant_outputs": use_sampled_output_ports, **(estimator_kwargs or {})}
+    estimator = builder.AddSystem(ExternalWrenchEstimator(time_step, robot, **kwargs))
     builder.Connect(plant.get_state_output_port(iiwa), estimator.GetInputPort("state"))
     builder.Connect(
         plant.get_net_actuation_output_port(iiwa), estimator.GetInputPort("applied_torque")

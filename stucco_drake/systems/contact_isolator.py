@@ -31,8 +31,8 @@ from stucco_drake.systems.gripper_samples import (
     sample_gripper_surface,
     sample_hull_bridges,
 )
+from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.ports import eval_finite
-from stucco_drake.systems.wrench_estimator import N_ARM, make_robot_plant
 
 #: contact_source values.
 SOURCE_NONE, SOURCE_CPF, SOURCE_BUBBLE = 0.0, 1.0, 2.0
@@ -54,27 +54,24 @@ def pose_from_vector(vector) -> RigidTransform:
 
 
 class GripperPoseFromState(LeafSystem):
-    """Pose of ``gripper_frame`` from the measured arm state, by forward kinematics.
+    """Pose of the robot's end-effector frame from the measured joint state, by forward
+    kinematics.
 
-    Input ``state`` (14): the arm's [q (rad); v (rad/s)]; output ``gripper_pose`` (7): see the
-    module's pose convention. Fingers are held at ``finger_positions`` (m); X_WB is the arm
-    base's pose, as for :class:`~stucco_drake.systems.wrench_estimator.ExternalWrenchEstimator`.
+    Input ``state`` (2 n): the observed joints' [q; v] (see :class:`ObservedRobot`); output
+    ``gripper_pose`` (7): the pose of ``robot.frame`` in world (the module's pose convention).
+    Joints not observed are held at the robot's positions.
     """
 
-    def __init__(self, *, X_WB: RigidTransform | None = None, finger_positions=(0.03, 0.03)):
+    def __init__(self, robot: ObservedRobot):
         super().__init__()
-        self._plant = make_robot_plant(X_WB)
-        self._context = self._plant.CreateDefaultContext()
-        self._q = self._plant.GetPositions(self._context)
-        self._q[N_ARM:] = finger_positions
-        self._frame = self._plant.GetFrameByName("gripper_frame")
-        self._state = self.DeclareVectorInputPort("state", 2 * N_ARM)
-        self.DeclareVectorOutputPort("gripper_pose", 7, self._calc)
+        self.robot = robot
+        self._state = self.DeclareVectorInputPort("state", 2 * robot.n)
+        self.DeclareVectorOutputPort("gripper_pose", 7, self.calc_gripper_pose)
 
-    def _calc(self, context, output):
-        self._q[:N_ARM] = self._state.Eval(context)[:N_ARM]
-        self._plant.SetPositions(self._context, self._q)
-        output.SetFromVector(pose_vector(self._frame.CalcPoseInWorld(self._context)))
+    def calc_gripper_pose(self, context, output):
+        robot = self.robot
+        robot.set_state(self._state.Eval(context)[: robot.n])
+        output.SetFromVector(pose_vector(robot.frame.CalcPoseInWorld(robot.context)))
 
 
 # --------------------------------------------------------------------------------- ambiguity

@@ -8,51 +8,38 @@ model of the robot alone (arm + gripper, no objects). It never reads contact for
 from __future__ import annotations
 
 import numpy as np
-from pydrake.math import RigidTransform
-from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import LeafSystem
 
 from stucco_drake.core.detection import ResidualStatistics
 from stucco_drake.core.momentum_observer import memory_size, observer_step, wrench_least_squares
-from stucco_drake.models import add_iiwa14_with_bubble_gripper, configure_parser
+from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.ports import eval_finite
-
-N_ARM = 7
 
 # Noise draws come in blocks of this many steps, one Generator per block (see _noise).
 _NOISE_BLOCK = 4096
 _ORIGIN = np.zeros(3)
 
 
-class _S:
-    """Slices of the estimator's state vector: the observer memory, then what outputs show."""
+class _StateLayout:
+    """Slices of the estimator's state vector for n observed joints: the observer memory, then
+    what the outputs show (r, wrench, chi-square, frame position)."""
 
-    memory = slice(0, memory_size(N_ARM))  # 71 entries
-    r = slice(71, 78)
-    wrench = slice(78, 84)
-    chi2 = slice(84, 85)
-    position = slice(85, 88)
-    size = 88
-
-
-def make_robot_plant(X_WB: RigidTransform | None = None) -> MultibodyPlant:
-    """A continuous, finalized plant of the iiwa14 + bubble gripper alone, base welded at X_WB.
-
-    This is the observer's robot model. Its arm coordinates come first (velocity indices 0-6),
-    then the two finger joints.
-    """
-    plant = MultibodyPlant(0.0)
-    iiwa, _ = add_iiwa14_with_bubble_gripper(configure_parser(Parser(plant)))
-    base = plant.GetFrameByName("iiwa_link_0", iiwa)
-    plant.WeldFrames(plant.world_frame(), base, X_WB if X_WB is not None else RigidTransform())
-    plant.Finalize()
-    return plant
+    def __init__(self, n: int):
+        m = memory_size(n)
+        self.memory = slice(0, m)
+        self.r = slice(m, m + n)
+        self.wrench = slice(m + n, m + n + 6)
+        self.chi2 = slice(m + n + 6, m + n + 7)
+        self.position = slice(m + n + 7, m + n + 10)
+        self.size = m + n + 10
 
 
 class ExternalWrenchEstimator(LeafSystem):
-    r"""Momentum observer for the iiwa14's external joint torques and end-effector wrench.
+    r"""Momentum observer for a robot arm's external joint torques and end-effector wrench.
+
+    The robot is the caller's (an :class:`ObservedRobot`: a robot-only plant, the end-effector
+    frame, the observed joints); below, n is the number of observed joints and E the frame.
 
     **Continuous form.** With p = M(q) v, M v̇ + C(q, v) v = τ + τ_g(q) + τ_ext and
     Ṁ = C + Cᵀ, the momentum obeys ṗ = τ + τ_g + Cᵀv + τ_ext, and the residual
@@ -73,9 +60,9 @@ class ExternalWrenchEstimator(LeafSystem):
     would be the one-step, unfiltered estimate). The output at time t estimates τ_ext over the
     last plant step this system has seen, filtered with time constant 1/K_O.
 
-    **Timing (which torque goes with which state).** Wire ``state`` from the plant's
-    ``get_state_output_port(iiwa)`` and ``applied_torque`` from its
-    ``get_net_actuation_output_port(iiwa)`` (the torque the plant actually applied, after any
+    **Timing (which torque goes with which state).** Wire ``state`` from the simulated plant's
+    ``get_state_output_port(arm)`` and ``applied_torque`` from its
+    ``get_net_actuation_output_port(arm)`` (the torque the plant actually applied, after any
     clamping or built-in PD). With ``MultibodyPlantConfig.use_sampled_output_ports`` true (Drake's
     default) the plant has already stepped when this update runs at the same tick: the state is
     x_{n+1} and the torque is τ_n, the one that produced it. With sampled ports off, the state is
@@ -83,19 +70,19 @@ class ExternalWrenchEstimator(LeafSystem):
     a mismatch pairs each state with the torque of the neighbouring step and shows up as a
     residual proportional to the torque's rate of change.
 
-    **Gripper fingers.** The fingers are treated as rigid parts of the robot, held at
-    ``finger_positions`` (m). That is exact when they are held fixed: their joint forces act
-    only in the fingers' rows of the equations, never in the arm's rows used here. (A finger that
-    moves adds its reaction to the arm's residual: held only by a PD loop, a 5-10 N push on the
-    palm swung them by centimetres and gave force errors up to 18 %; lock them, e.g. with SAP's
-    ``Joint.Lock``, or hold them stiffly.)
+    **Joints not observed** (e.g. a gripper's fingers) are treated as rigid parts of the robot,
+    held at the robot's ``positions``. That is exact when they are held fixed: their joint
+    forces act only in the fingers' rows of the equations, never in the arm's rows used here.
+    (A finger that moves adds its reaction to the arm's residual: held only by a PD loop, a
+    5-10 N push on the palm swung them by centimetres and gave force errors up to 18 %; lock
+    them, e.g. with SAP's ``Joint.Lock``, or hold them stiffly.)
 
     **End-effector wrench.** τ_ext = Jᵀ F for a spatial force F = [τ; f] (Drake's SpatialForce
-    order: torque (N·m) then force (N)) applied at the origin of ``gripper_frame``, expressed in
-    the world frame, with J the 6x7 arm Jacobian of that frame's spatial velocity (in world). F is
+    order: torque (N·m) then force (N)) applied at the origin of E, expressed in the world frame,
+    with J the 6 x n Jacobian of E's spatial velocity (in world) over the observed joints. F is
     the damped least-squares solution of Jᵀ F = r, i.e. (J Jᵀ + λ² I) F = J r: the least-squares
-    fit (7 equations, 6 unknowns) kept finite near singular arm configurations. The part of r that
-    no wrench at the gripper explains (contact on the arm's links, model error) is dropped.
+    fit (n equations, 6 unknowns) kept finite near singular arm configurations. The part of r
+    that no wrench at E explains (contact on the arm's links, model error) is dropped.
 
     **Detection statistic.** ``residual_chi2`` = (F - μ)ᵀ Σ⁻¹ (F - μ) with μ, Σ the wrench's
     free-space mean and covariance (``residual_statistics``; see
@@ -108,10 +95,12 @@ class ExternalWrenchEstimator(LeafSystem):
 
     Args:
         time_step: update period h (s); use the plant's time step.
+        robot: the robot model (:class:`ObservedRobot`), e.g.
+            ``ObservedRobot(robot_plant, robot_plant.GetFrameByName("gripper_frame"),
+            joints=range(7), positions=q_held)``. The system keeps it (its scratch context
+            holds only what the current update writes).
         gain: K_O (1/s), the observer's bandwidth; 0 < K_O h <= 1. Higher tracks faster and
             passes more velocity noise (which enters p = M v directly).
-        X_WB: pose of the arm's base ``iiwa_link_0`` in world, as welded in the simulated scene.
-        finger_positions: (2,) finger joint positions (m) [right, left]; default the model's.
         residual_statistics: free-space wrench statistics for ``residual_chi2``; default
             :func:`default_wrench_statistics` (uncalibrated).
         damping: λ of the damped least squares (units of J, i.e. m or 1; 1e-3 is far below
@@ -120,25 +109,23 @@ class ExternalWrenchEstimator(LeafSystem):
         sampled_plant_outputs: see Timing.
 
     Input ports:
-        state: (14,) the arm's [q (rad); v (rad/s)], joints 1-7.
-        applied_torque: (7,) joint torques (N·m) applied by the arm's actuators (see Timing).
+        state: (2 n,) the observed joints' [q (rad or m); v (rad/s or m/s)].
+        applied_torque: (n,) joint torques (N·m or N) their actuators applied (see Timing).
 
     Output ports (from discrete state, updated every ``time_step`` s, no direct feedthrough;
     the residual, wrench and statistic are zero until the second update):
-        external_joint_torques: (7,) r, the estimated external joint torques (N·m).
-        ee_wrench: (6,) [τ (N·m); f (N)] on the gripper at the origin of ``gripper_frame``,
-            expressed in world.
+        external_joint_torques: (n,) r, the estimated external joint torques (N·m).
+        ee_wrench: (6,) [τ (N·m); f (N)] on the robot at the origin of E, expressed in world.
         residual_chi2: (1,) the detection statistic above (dimensionless).
-        ee_position: (3,) origin of ``gripper_frame`` in world (m), from the measured q.
+        ee_position: (3,) origin of E in world (m), from the measured q.
     """
 
     def __init__(
         self,
         time_step: float,
+        robot: ObservedRobot,
         *,
         gain: float = 50.0,
-        X_WB: RigidTransform | None = None,
-        finger_positions=None,
         residual_statistics: ResidualStatistics | None = None,
         damping: float = 1e-3,
         torque_noise_std: float = 0.0,
@@ -162,9 +149,8 @@ class ExternalWrenchEstimator(LeafSystem):
         self.time_step = float(time_step)
         self._torque_lags_state = bool(sampled_plant_outputs)
         self.gain = float(gain)
-        self._noise_std = np.r_[
-            np.full(N_ARM, torque_noise_std), np.full(N_ARM, velocity_noise_std)
-        ]
+        n = robot.n
+        self._noise_std = np.r_[np.full(n, torque_noise_std), np.full(n, velocity_noise_std)]
         self._noise_seed = noise_seed
         self._noise_cache: tuple[int, np.ndarray] | None = None
         stats = residual_statistics or default_wrench_statistics()
@@ -175,29 +161,22 @@ class ExternalWrenchEstimator(LeafSystem):
         self._stats_mean = stats.mean
         self._precision = stats.precision()
 
-        # The observer's own robot-only plant and a context for it (scratch: it holds only what
-        # the current update writes, so it carries nothing between steps).
-        self.robot_plant = make_robot_plant(X_WB)
-        self._robot_context = self.robot_plant.CreateDefaultContext()
-        nv = self.robot_plant.num_velocities()
-        q0 = self.robot_plant.GetPositions(self._robot_context)
-        if finger_positions is not None:
-            q0[N_ARM:] = np.asarray(finger_positions, dtype=float).reshape(nv - N_ARM)
-        self._qv = np.concatenate([q0, np.zeros(nv)])  # robot [q; v], fingers fixed, at rest
-        self._nq = q0.size
-        self._gripper_frame = self.robot_plant.GetFrameByName("gripper_frame")
-        self._world = self.robot_plant.world_frame()
+        # The robot model (its scratch context holds only what the current update writes).
+        self.robot = robot
+        self.robot_plant = robot.plant
+        self._world = robot.plant.world_frame()
         self._damping = float(damping)
 
-        self._state_port = self.DeclareVectorInputPort("state", 2 * N_ARM)
-        self._torque_port = self.DeclareVectorInputPort("applied_torque", N_ARM)
-        # One state vector (one write per update), laid out as in _S.
-        self._xd = self.DeclareDiscreteState(_S.size)
+        self._state_port = self.DeclareVectorInputPort("state", 2 * n)
+        self._torque_port = self.DeclareVectorInputPort("applied_torque", n)
+        # One state vector (one write per update), laid out as in _StateLayout.
+        self._layout = layout = _StateLayout(n)
+        self._xd = self.DeclareDiscreteState(layout.size)
         for name, part in (
-            ("external_joint_torques", _S.r),
-            ("ee_wrench", _S.wrench),
-            ("residual_chi2", _S.chi2),
-            ("ee_position", _S.position),
+            ("external_joint_torques", layout.r),
+            ("ee_wrench", layout.wrench),
+            ("residual_chi2", layout.chi2),
+            ("ee_position", layout.position),
         ):
             self.DeclareVectorOutputPort(
                 name,
@@ -217,45 +196,47 @@ class ExternalWrenchEstimator(LeafSystem):
 
     # ----------------------------------------------------------------------------------- update
     def _noise(self, n: int) -> np.ndarray:
-        """Noise for update n: (14,) [torque; velocity], a pure function of (seed, n)."""
+        """Noise for update n: (2 n_joints,) [torque; velocity], a function of (seed, n)."""
         block, row = divmod(n, _NOISE_BLOCK)
         if self._noise_cache is None or self._noise_cache[0] != block:
             # One Generator per block, keyed by (seed, block): draws never depend on how many
             # updates ran before in this process or context.
             rng = np.random.default_rng([self._noise_seed, block])
-            self._noise_cache = (block, rng.standard_normal((_NOISE_BLOCK, 2 * N_ARM)))
+            shape = (_NOISE_BLOCK, 2 * self.robot.n)
+            self._noise_cache = (block, rng.standard_normal(shape))
         return self._noise_cache[1][row] * self._noise_std
 
     def _update(self, context, discrete_state):
         x = eval_finite("ExternalWrenchEstimator", context, self._state_port)
         tau = eval_finite("ExternalWrenchEstimator", context, self._torque_port)
         old = context.get_discrete_state(self._xd).get_value()
-        v = x[N_ARM:]
+        robot, S = self.robot, self._layout
+        n = robot.n
+        v = x[n:]
         if self._noisy:
             noise = self._noise(int(old[0]))
-            tau = tau + noise[:N_ARM]
-            v = v + noise[N_ARM:]
+            tau = tau + noise[:n]
+            v = v + noise[n:]
 
-        plant, ctx, qv = self.robot_plant, self._robot_context, self._qv
-        qv[:N_ARM] = x[:N_ARM]
-        qv[self._nq : self._nq + N_ARM] = v
-        plant.SetPositionsAndVelocities(ctx, qv)
-        M = plant.CalcMassMatrix(ctx)[:N_ARM, :N_ARM]
-        known = plant.CalcGravityGeneralizedForces(ctx)[:N_ARM] - plant.CalcBiasTerm(ctx)[:N_ARM]
+        robot.set_state(x[:n], v)
+        plant, ctx = robot.plant, robot.context
+        M = robot.block(plant.CalcMassMatrix(ctx))
+        known = robot.rows(plant.CalcGravityGeneralizedForces(ctx)) - robot.rows(
+            plant.CalcBiasTerm(ctx))  # fmt: skip
         new = old.copy()
-        new[_S.memory], r = observer_step(
-            old[_S.memory], old[_S.r], M, known, tau, v,
+        new[S.memory], r = observer_step(
+            old[S.memory], old[S.r], M, known, tau, v,
             self.time_step, self.gain, self._torque_lags_state,
         )  # fmt: skip
-        J = plant.CalcJacobianSpatialVelocity(
-            ctx, JacobianWrtVariable.kV, self._gripper_frame, _ORIGIN, self._world, self._world
-        )[:, :N_ARM]
+        J = robot.columns(plant.CalcJacobianSpatialVelocity(
+            ctx, JacobianWrtVariable.kV, robot.frame, _ORIGIN, self._world, self._world
+        ))  # fmt: skip
         wrench = wrench_least_squares(J, r, self._damping)
         e = wrench - self._stats_mean
-        new[_S.r] = r
-        new[_S.wrench] = wrench
-        new[_S.chi2] = e @ self._precision @ e
-        new[_S.position] = self._gripper_frame.CalcPoseInWorld(ctx).translation()
+        new[S.r] = r
+        new[S.wrench] = wrench
+        new[S.chi2] = e @ self._precision @ e
+        new[S.position] = robot.frame.CalcPoseInWorld(ctx).translation()
         discrete_state.set_value(self._xd, new)
 
 
@@ -268,4 +249,4 @@ def default_wrench_statistics() -> ResidualStatistics:
     return ResidualStatistics.isotropic([0.05] * 3 + [0.5] * 3)
 
 
-__all__ = ["ExternalWrenchEstimator", "default_wrench_statistics", "make_robot_plant"]
+__all__ = ["ExternalWrenchEstimator", "default_wrench_statistics"]
