@@ -31,7 +31,7 @@ from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.grasp import build_grasp_scene
 from stucco_drake.gripper_sdf import gripper_penetration
-from stucco_drake.models import IIWA_ARM_JOINTS, iiwa_observed_robot_arguments
+from stucco_drake.models import IIWA_ARM_JOINTS, bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.action_contacts_assembler import (
@@ -350,9 +350,9 @@ def build_bor_diagram(
     )
     builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
     bubbles = builder.AddNamedSystem(
-        "bubble_sensor", BubbleContactSensor(built.plant, built.scene_graph, h,
-                                             noise_std=noise.bubble_point_std,
-                                             noise_seed=bubble_seed),
+        "bubble_sensor", BubbleContactSensor(
+            built.plant, built.scene_graph, h, bubble_bodies(built.plant),
+            noise_std=noise.bubble_point_std, noise_seed=bubble_seed),
     )
     builder.Connect(sub.GetOutputPort("contact_results"), bubbles.GetInputPort("contact_results"))
     builder.Connect(sub.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))

@@ -161,3 +161,10 @@ def iiwa_observed_robot_arguments(X_WB: RigidTransform | None = None,
         positions[len(IIWA_ARM_JOINTS):] = np.asarray(finger_positions, dtype=float).reshape(-1)
     return {"plant": plant, "frame": plant.GetFrameByName("gripper_frame"),
             "joints": IIWA_ARM_JOINTS, "positions": positions}  # fmt: skip
+
+
+def bubble_bodies(plant: MultibodyPlant, gripper_name: str = "bubble_gripper") -> list:
+    """The bubble gripper's two fingers in ``plant`` (the bodies carrying its bubbles), left
+    then right: the order of the bubble sensor's outputs."""
+    instance = plant.GetModelInstanceByName(gripper_name)
+    return [plant.GetBodyByName(name, instance) for name in ("left_finger", "right_finger")]

@@ -27,7 +27,12 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 from pydrake.trajectories import PiecewisePolynomial
 
-from stucco_drake.models import BUBBLE_GRIPPER_URL, configure_parser, iiwa_observed_robot_arguments
+from stucco_drake.models import (
+    BUBBLE_GRIPPER_URL,
+    bubble_bodies,
+    configure_parser,
+    iiwa_observed_robot_arguments,
+)
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
 from stucco_drake.systems.contact_detector import (
     FINGERS_NOMINAL,
@@ -279,7 +284,7 @@ def bubble_scene(yaw_deg: float, press: float, gap: float = 0.001):
     size = np.array([0.02, 0.2, 0.23])
     plant.RegisterCollisionGeometry(plant.world_body(), X_WBox, Box(*size), "box", props)
     plant.Finalize()
-    sensor = builder.AddSystem(BubbleContactSensor(plant, scene_graph, 1e-3))
+    sensor = builder.AddSystem(BubbleContactSensor(plant, scene_graph, 1e-3, bubble_bodies(plant)))
     builder.Connect(plant.get_contact_results_output_port(), sensor.GetInputPort("contact_results"))
     builder.Connect(plant.get_body_poses_output_port(), sensor.GetInputPort("body_poses"))
     u = np.zeros(plant.num_actuators())

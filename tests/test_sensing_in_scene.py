@@ -36,7 +36,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
 from stucco_drake.bor import _arm_selectors
-from stucco_drake.models import iiwa_observed_robot_arguments
+from stucco_drake.models import bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import build_scene, load_scene_text
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
@@ -202,7 +202,8 @@ def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     pose = builder.AddSystem(GripperPoseFromState(
         ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))))
     builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
-    bubbles = builder.AddSystem(BubbleContactSensor(built.plant, built.scene_graph, h))
+    bubbles = builder.AddSystem(BubbleContactSensor(
+        built.plant, built.scene_graph, h, bubble_bodies(built.plant)))
     builder.Connect(sub.GetOutputPort("contact_results"), bubbles.GetInputPort("contact_results"))
     builder.Connect(sub.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))
     truth = builder.AddSystem(GripperObjectContacts(built))

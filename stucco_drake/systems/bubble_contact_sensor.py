@@ -43,16 +43,22 @@ def _surface_moments(surface):
 class BubbleContactSensor(LeafSystem):
     """Contact point per soft bubble, from the plant's contact results.
 
-    The bubbles are the ellipsoid collision geometries of the gripper model instance's bodies,
-    ordered by body name (``left_finger``, ``right_finger``). Per update (every ``time_step``
-    s), for each bubble: its hydroelastic contact surfaces are gathered; its penetration is the
-    largest depth of their vertices inside the undeformed ellipsoid (exact ellipsoid distance);
-    when that exceeds ``deformation_threshold`` (m) the bubble fires, at the pressure-weighted
-    centroid of its surfaces (several surfaces are merged by their pressure x area). A bubble in
-    point contact (hydroelastic fallback) uses the point pair's contact point and depth.
+    The bubbles are the ellipsoid collision geometries of the caller's ``bodies`` (the robot's
+    tactile links, e.g. a bubble gripper's two fingers), in that order. Per update (every
+    ``time_step`` s), for each bubble: its hydroelastic contact surfaces are gathered; its
+    penetration is the largest depth of their vertices inside the undeformed ellipsoid (exact
+    ellipsoid distance); when that exceeds ``deformation_threshold`` (m) the bubble fires, at
+    the pressure-weighted centroid of its surfaces (several surfaces are merged by their
+    pressure x area). A bubble in point contact (hydroelastic fallback) uses the point pair's
+    contact point and depth.
 
     Noise (optional): Gaussian noise of std ``noise_std`` (m) on each reported point, drawn from
     numpy Generators keyed by (``noise_seed``, update count).
+
+    Args:
+        plant, scene_graph: the simulated plant (robot and objects) and its SceneGraph.
+        time_step: update period (s); use the plant's time step.
+        bodies: the plant's bodies whose ellipsoid collision geometries are bubbles.
 
     Input ports:
         contact_results: the plant's ``ContactResults`` (``get_contact_results_output_port``).
@@ -65,18 +71,16 @@ class BubbleContactSensor(LeafSystem):
         bubble_penetration: (n,) each bubble's penetration (m), 0 without contact.
     """
 
-    def __init__(self, plant: MultibodyPlant, scene_graph: SceneGraph, time_step: float, *,
-                 gripper_name: str = "bubble_gripper", deformation_threshold: float = 1e-3,
-                 noise_std: float = 0.0, noise_seed: int | None = None):  # fmt: skip
+    def __init__(self, plant: MultibodyPlant, scene_graph: SceneGraph, time_step: float,
+                 bodies, *, deformation_threshold: float = 1e-3, noise_std: float = 0.0,
+                 noise_seed: int | None = None):  # fmt: skip
         super().__init__()
         if noise_std < 0 or (noise_std > 0 and noise_seed is None):
             raise ValueError("BubbleContactSensor: noise_std must be >= 0; noise needs a seed")
-        instance = plant.GetModelInstanceByName(gripper_name)
         inspector = scene_graph.model_inspector()
         bubbles = []
-        for body_index in sorted(plant.GetBodyIndices(instance),
-                                 key=lambda b: plant.get_body(b).name()):  # fmt: skip
-            body = plant.get_body(body_index)
+        for body in bodies:
+            body_index = body.index()
             for gid in plant.GetCollisionGeometriesForBody(body):
                 shape = inspector.GetShape(gid)
                 if isinstance(shape, Ellipsoid):
@@ -84,7 +88,8 @@ class BubbleContactSensor(LeafSystem):
                     X_BG = inspector.GetPoseInFrame(gid)
                     bubbles.append((gid, int(body_index), X_BG, radii, body.name()))
         if not bubbles:
-            raise ValueError(f"BubbleContactSensor: no ellipsoid geometry in '{gripper_name}'")
+            names = [body.name() for body in bodies]
+            raise ValueError(f"BubbleContactSensor: no ellipsoid geometry on bodies {names}")
         self.bubble_names = [b[4] for b in bubbles]
         self._bubbles = bubbles
         self._index = {b[0]: i for i, b in enumerate(bubbles)}
