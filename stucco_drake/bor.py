@@ -1,7 +1,8 @@
 """The Blind Object Retrieval Diagram: a scene, proprioceptive contact sensing, STUCCO, ICP.
 
 :func:`build_bor_diagram` nests a scene's Diagram (plant, joint control, planar IK and action
-sequence; see :mod:`stucco_drake.scenes.builder`) and wires, every plant step,
+sequence; see :mod:`stucco_drake.scenes.builder`) and adds around it, with
+:func:`~stucco_drake.contact_tracking.add_contact_tracking` (the chain any Diagram can use),
 
     robot state + applied torque -> ExternalWrenchEstimator -> ContactDetector
     -> ContactIsolator (bubbles first, BubbleContactSensor; else the CPF)
@@ -24,8 +25,8 @@ from pydrake.geometry import Box, Cylinder
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import MatrixGain
 
+from stucco_drake.contact_tracking import Tactile, add_contact_tracking
 from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
@@ -43,9 +44,8 @@ from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
 from stucco_drake.systems.contact_detector import (
     ContactDetector,
     calibrate_residual_statistics,
-    default_threshold,
 )
-from stucco_drake.systems.contact_isolator import ContactIsolator, GripperPoseFromState
+from stucco_drake.systems.contact_isolator import ContactIsolator
 from stucco_drake.systems.contact_tracking_visualizer import ContactTrackingVisualizer
 from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
@@ -306,11 +306,6 @@ def build_bor_diagram(
 
     builder = DiagramBuilder()
     sub = builder.AddNamedSystem("scene", built.diagram)
-    S, T = _arm_selectors(built.robot_plant)
-    arm_state = builder.AddNamedSystem("arm_state", MatrixGain(S))
-    arm_torque = builder.AddNamedSystem("arm_torque", MatrixGain(T))
-    builder.Connect(sub.GetOutputPort("robot_state"), arm_state.get_input_port())
-    builder.Connect(sub.GetOutputPort("applied_torque"), arm_torque.get_input_port())
 
     noise = scene.sensor_noise
     torque_seed, bubble_seed = _noise_seeds(seed)
@@ -322,70 +317,29 @@ def build_bor_diagram(
     # calibrated once, not per episode): the detector's statistics are those of the sensor.
     calibration = dict(observer, noise_seed=0) if "noise_seed" in observer else observer
     stats = calibrate_residual_statistics(time_step=h, estimator_kwargs=calibration)
-    estimator = builder.AddNamedSystem("wrench_estimator", ExternalWrenchEstimator(
-        h, ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers)),
-        residual_statistics=stats,
-        # The scene's ports decide which torque goes with which state (estimator's Timing).
-        sampled_plant_outputs=bool(scene.plant.use_sampled_output_ports), **observer,
-    ))  # fmt: skip
-    builder.Connect(arm_state.get_output_port(), estimator.GetInputPort("state"))
-    builder.Connect(arm_torque.get_output_port(), estimator.GetInputPort("applied_torque"))
-
-    detector = builder.AddNamedSystem("contact_detector", ContactDetector(
-        h, default_threshold() if threshold is None else threshold
-    ))  # fmt: skip
-    for name in ("residual_chi2", "ee_position"):
-        builder.Connect(estimator.GetOutputPort(name), detector.GetInputPort(name))
     if external_actions:
         builder.ExportInput(sub.GetInputPort("planar_step"), "planar_step")
         clock = builder.AddNamedSystem("action_clock", ActionClock(scene.action_duration))
         action_index = clock.get_output_port()
     else:
         action_index = sub.GetOutputPort("action_index")
-    builder.Connect(action_index, detector.GetInputPort("action_index"))
-
-    pose = builder.AddNamedSystem(
-        "gripper_pose",
-        GripperPoseFromState(ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))),
-    )
-    builder.Connect(arm_state.get_output_port(), pose.GetInputPort("state"))
-    bubbles = builder.AddNamedSystem(
-        "bubble_sensor", BubbleContactSensor(
-            built.plant, built.scene_graph, h, bubble_bodies(built.plant),
-            noise_std=noise.bubble_point_std, noise_seed=bubble_seed),
-    )
-    builder.Connect(sub.GetOutputPort("contact_results"), bubbles.GetInputPort("contact_results"))
-    builder.Connect(sub.GetOutputPort("body_poses"), bubbles.GetInputPort("body_poses"))
-
-    isolator = builder.AddNamedSystem("contact_isolator", ContactIsolator(
-        h, seed=cpf_seed, opening=scene.gripper_start.finger_position, n_bubbles=2
-    ))  # fmt: skip
-    builder.Connect(estimator.GetOutputPort("ee_wrench"), isolator.GetInputPort("ee_wrench"))
-    builder.Connect(pose.GetOutputPort("gripper_pose"), isolator.GetInputPort("gripper_pose"))
-    builder.Connect(detector.GetOutputPort("in_contact"), isolator.GetInputPort("in_contact"))
-    for name in ("bubble_in_contact", "bubble_contact_points"):
-        builder.Connect(bubbles.GetOutputPort(name), isolator.GetInputPort(name))
-
+    robot = ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))
     truth = RobotObjectContacts(built)
-    assembler = builder.AddNamedSystem("action_contacts", ActionContactsAssembler(h, truth=truth))
-    builder.Connect(sub.GetOutputPort("plant_state"), assembler.GetInputPort("truth_state"))
-    for name in ("current_action", "completed_action"):
-        builder.Connect(detector.GetOutputPort(name), assembler.GetInputPort(name))
-    for name in ("has_contact", "contact_points"):
-        builder.Connect(isolator.GetOutputPort(name), assembler.GetInputPort(name))
-    builder.Connect(pose.GetOutputPort("gripper_pose"), assembler.GetInputPort("gripper_pose"))
-
-    tracker = make_tracker(method, tracker_params, penetration)
-    tracking = builder.AddNamedSystem("soft_tracking", SoftTrackingFilter(
-        tracker, tracker_seed, h, dx_model=dx_model, robot_sdf=penetration.robot_sdf))
-    for name in ("ee_pose", "action_contacts"):
-        builder.Connect(assembler.GetOutputPort(name), tracking.GetInputPort(name))
-    target = builder.AddNamedSystem(
-        "target_pose_estimator", TargetPoseEstimator(shape, penetration, icp_seed, h)
-    )
-    builder.Connect(assembler.GetOutputPort("ee_pose"), target.GetInputPort("ee_pose"))
-    for name in ("map_points", "segment_labels", "tracked_action", "point_spread"):
-        builder.Connect(tracking.GetOutputPort(name), target.GetInputPort(name))
+    chain = add_contact_tracking(
+        builder, robot, robot_state=sub.GetOutputPort("robot_state"),
+        applied_torque=sub.GetOutputPort("applied_torque"), action_index=action_index, time_step=h,
+        tracker=make_tracker(method, tracker_params, penetration), tracker_seed=tracker_seed,
+        penetration=penetration, target_shape=shape, icp_seed=icp_seed, cpf_seed=cpf_seed,
+        # The scene's ports decide which torque goes with which state (estimator's Timing).
+        estimator_kwargs=dict(observer, residual_statistics=stats, sampled_plant_outputs=bool(
+            scene.plant.use_sampled_output_ports)),
+        threshold=threshold, isolator_kwargs={"opening": scene.gripper_start.finger_position},
+        tactile=Tactile(built.plant, built.scene_graph, bubble_bodies(built.plant),
+                        sub.GetOutputPort("contact_results"), sub.GetOutputPort("body_poses"),
+                        noise.bubble_point_std, bubble_seed),
+        truth=truth, truth_state=sub.GetOutputPort("plant_state"), dx_model=dx_model,
+    )  # fmt: skip
+    tracking, target, assembler = chain.tracking, chain.target_estimator, chain.assembler
 
     if meshcat is not None:
         drawing = builder.AddNamedSystem(
@@ -395,13 +349,11 @@ def build_bor_diagram(
                              (assembler, "action_contacts"), (target, "target_pose")):  # fmt: skip
             builder.Connect(system.GetOutputPort(name), drawing.GetInputPort(name))
 
-    for system, name in ((tracking, "map_points"), (tracking, "segment_labels"),
-                         (target, "target_pose"), (target, "estimate"),
-                         (target, "pose_hypotheses"), (target, "target_confidence"),
-                         (assembler, "action_contacts"), (assembler, "action_truth"),
-                         (detector, "in_contact")):  # fmt: skip
-        builder.ExportOutput(system.GetOutputPort(name), name)
+    for name, port in chain.outputs.items():
+        if name != "ee_pose":
+            builder.ExportOutput(port, name)
     diagram = builder.Build()
     diagram.set_name(f"bor_{scene.name}_{method}")
     return BorDiagram(diagram, built, method, int(seed), scene.target, shape, penetration,
-                      estimator, detector, isolator, bubbles, assembler, tracking, target, truth)
+                      chain.estimator, chain.detector, chain.isolator, chain.bubble_sensor,
+                      assembler, tracking, target, truth)  # fmt: skip

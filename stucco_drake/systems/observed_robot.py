@@ -30,6 +30,8 @@ class ObservedRobot:
 
     Attributes:
         n: number of observed joints (port sizes: state 2 n, torques n).
+        plant, frame, joints, positions: the arguments (joints as an index array).
+        context: the scratch context the systems evaluate the model in.
     """
 
     def __init__(self, plant: MultibodyPlant, frame, *, joints=None, positions=None):
@@ -53,6 +55,7 @@ class ObservedRobot:
         q = np.asarray(q, dtype=float)
         if q.shape != (nq,) or not np.all(np.isfinite(q)):
             raise ValueError(f"ObservedRobot: positions must be {nq} finite values")
+        self.positions = q.copy()
         # [q; v] of the whole plant: held joints at their positions and at rest.
         self._qv = np.concatenate([q, np.zeros(nv)])
         self._nq = nq
