@@ -3,8 +3,8 @@
 Truth: Drake's own geometry. After the block's six pushes, every tracked contact point must
 lie within 3 cm of an object's surface in the final state (SceneGraph's signed distance to
 each point; measured 0.45-0.57 cm for its 3 points; the paper's FB contact error is 0.72 cm,
-our Table II's 1.43 cm). Uncalibrated, or with the estimator's timing not matched to the
-scene's ports, a point lands 8 cm from every object: the bound does fail.
+our Table II's 1.43 cm). Uncalibrated and with the estimator's timing not matched to the
+scene's ports, a point landed 8 cm from every object: the bound can fail.
 """
 
 from __future__ import annotations
