@@ -105,7 +105,7 @@ def run_reference(scene, n_actions: int, timer: SystemTimer) -> tuple[float, flo
     """The scene alone for ``n_actions``: (simulated s, wall s)."""
     from pydrake.systems.analysis import Simulator
 
-    from stucco_drake.grasp import build_grasp_scene
+    from stucco_drake.bor.grasp import build_grasp_scene
 
     built = build_grasp_scene(scene, external_actions=False)
     simulator = Simulator(built.diagram)
@@ -137,8 +137,8 @@ def main() -> None:
           f"load average {os.getloadavg()[0]:.2f}")
 
     timer = SystemTimer(_systems())  # before anything is built
-    from stucco_drake.bor import build_bor_diagram
-    from stucco_drake.bor_episode import run_episode
+    from stucco_drake.bor.diagram import build_bor_diagram
+    from stucco_drake.bor.episode import run_episode
     from stucco_drake.core.params import SoftTrackingParams
     from stucco_drake.scenes import load_scene
 

@@ -13,8 +13,8 @@ import time
 import numpy as np
 
 from stucco_drake.core.contact_isolation import ContactParticleFilter
+from stucco_drake.robot.gripper_samples import sample_gripper_surface
 from stucco_drake.systems.contact_isolator import ContactIsolator, pose_vector
-from stucco_drake.systems.gripper_samples import sample_gripper_surface
 
 STEPS = 20  # isolation calls per contact
 CONTACTS = 150

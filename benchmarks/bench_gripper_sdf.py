@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stucco_drake.gripper_sdf import GripperDistance, gripper_grid_sdf
+from stucco_drake.robot.gripper_sdf import GripperDistance, gripper_grid_sdf
 
 
 def _drake_cost_per_point(distance: GripperDistance, n: int = 20_000) -> float:

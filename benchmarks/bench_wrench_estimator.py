@@ -23,7 +23,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from stucco_drake.models import iiwa_observed_robot_arguments
+from stucco_drake.robot.models import iiwa_observed_robot_arguments
 from stucco_drake.systems.contact_detector import (
     FINGERS_NOMINAL,
     Q_NOMINAL,

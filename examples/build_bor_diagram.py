@@ -3,8 +3,8 @@
 Run: python examples/build_bor_diagram.py
 """
 
-from stucco_drake.bor import build_bor_diagram
-from stucco_drake.bor_cli import bor_graphviz
+from stucco_drake.bor.cli import bor_graphviz
+from stucco_drake.bor.diagram import build_bor_diagram
 
 bor = build_bor_diagram("FB", method="stucco", seed=0)
 print(f"{bor.diagram.get_name()}: target {bor.target_name!r}, shape {bor.target_shape}")

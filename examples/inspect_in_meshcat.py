@@ -8,7 +8,7 @@ import sys
 
 from pydrake.geometry import Meshcat, MeshcatParams
 
-from stucco_drake.bor_episode import run_episode
+from stucco_drake.bor.episode import run_episode
 
 n_actions = int(sys.argv[1]) if len(sys.argv) > 1 else 5
 meshcat = Meshcat(MeshcatParams(host="localhost"))  # this machine only

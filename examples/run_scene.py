@@ -5,7 +5,7 @@ Run: python examples/run_scene.py [N_ACTIONS]   (default 10; the full scene has 
 
 import sys
 
-from stucco_drake.bor_episode import run_episode
+from stucco_drake.bor.episode import run_episode
 
 n_actions = int(sys.argv[1]) if len(sys.argv) > 1 else 10
 

@@ -8,8 +8,8 @@ import time
 
 import numpy as np
 
-from stucco_drake.bor_cli import add_diagram_command, add_run_command
-from stucco_drake.bor_log import BOR_SOURCES, table_scenes
+from stucco_drake.bor.cli import add_diagram_command, add_run_command
+from stucco_drake.bor.log import BOR_SOURCES, table_scenes
 from stucco_drake.estimates_cli import add_estimates_command
 from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES

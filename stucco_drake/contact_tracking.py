@@ -9,8 +9,8 @@ target pose estimate:
 
 and returns them with their named output ports, the way a hardware station exports its ports.
 It builds no robot: the robot model (:class:`~stucco_drake.systems.observed_robot.ObservedRobot`)
-and the output ports it reads come from the caller. Our BOR Diagram (:mod:`stucco_drake.bor`)
-is this chain around the iiwa scene.
+and the output ports it reads come from the caller. Our BOR Diagram
+(:mod:`stucco_drake.bor.diagram`) is this chain around the iiwa scene.
 """
 
 from __future__ import annotations

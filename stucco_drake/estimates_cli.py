@@ -67,7 +67,7 @@ def _summary(rows: list[dict]) -> str:
 
 def run_estimates(args: argparse.Namespace) -> int:
     """Handler of ``stucco-drake estimates``."""
-    from stucco_drake import bor_log
+    from stucco_drake.bor import log as bor_log
     from stucco_drake.eval.episode_log import EpisodeLog
     from stucco_drake.eval.replay import replay
     from stucco_drake.eval.results import RunResults

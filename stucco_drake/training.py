@@ -42,14 +42,14 @@ import time
 
 import numpy as np
 
-from stucco_drake.bor import build_bor_diagram, object_surfaces
-from stucco_drake.bor_episode import action_stop_time, make_bor_simulator
-from stucco_drake.bor_log import EpisodeRecorder, log_penetration
+from stucco_drake.bor.diagram import build_bor_diagram, object_surfaces
+from stucco_drake.bor.episode import action_stop_time, make_bor_simulator
+from stucco_drake.bor.log import EpisodeRecorder, log_penetration
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.sets import TRAINING_SCENES
 from stucco_drake.eval.sources import EpisodeSource
+from stucco_drake.robot.gripper_samples import sample_gripper_surface
 from stucco_drake.scenes import SceneFile, build_scene, load_scene
-from stucco_drake.systems.gripper_samples import sample_gripper_surface
 from stucco_drake.systems.planar_controller import StartUnreachable, gripper_rotation
 
 #: Random actions taken after each detected contact (paper: "random walk of length 6").

@@ -108,8 +108,8 @@ def test_assembler_latches_the_last_contact_of_each_action():
 @pytest.fixture(scope="module")
 def short_fb():
     """FB's first actions through the STUCCO BOR Diagram; a context cloned after half of them."""
-    from stucco_drake.bor import build_bor_diagram
-    from stucco_drake.bor_episode import make_bor_simulator, run_episode
+    from stucco_drake.bor.diagram import build_bor_diagram
+    from stucco_drake.bor.episode import make_bor_simulator, run_episode
 
     bor = build_bor_diagram("FB", "stucco", seed=0)
     simulator = make_bor_simulator(bor)
@@ -188,7 +188,7 @@ def test_short_fb_tracks_contacts_and_scores(short_fb):
 
 def test_cloned_context_reruns_to_identical_map_points(short_fb):
     bor, simulator, snapshot, result = short_fb
-    from stucco_drake.bor_episode import action_stop_time, make_bor_simulator
+    from stucco_drake.bor.episode import action_stop_time, make_bor_simulator
 
     rerun = make_bor_simulator(bor, snapshot["context"])
     for k in range(N_SHORT // 2, N_SHORT):  # the same stops as the first run (see the function)
@@ -239,7 +239,7 @@ def test_free_motion_raises_no_wrench(short_fb):
 
 
 def test_committed_diagram_source_matches_the_code():
-    from stucco_drake.bor_cli import bor_graphviz
+    from stucco_drake.bor.cli import bor_graphviz
 
     committed = (DIAGRAMS / "bor.dot").read_text()
     assert bor_graphviz("FB") == committed, (
@@ -249,7 +249,7 @@ def test_committed_diagram_source_matches_the_code():
 
 
 def test_run_command_prints_one_result_line(capsys, tmp_path, monkeypatch):
-    import stucco_drake.bor_episode as bor_episode
+    import stucco_drake.bor.episode as bor_episode
     from stucco_drake.cli import main
     from stucco_drake.core.params import SoftTrackingParams
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from stucco_drake.bor_log import _planar_spec, grasp_from_log, log_penetration, record_episode
+from stucco_drake.bor.log import _planar_spec, grasp_from_log, log_penetration, record_episode
 from stucco_drake.core.baselines import TRACKER_NAMES
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, PlanarSurface

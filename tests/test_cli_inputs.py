@@ -25,8 +25,8 @@ class WorkStarted(AssertionError):
 @pytest.fixture
 def tripwire(monkeypatch):
     """Replaces everything a command does after its checks with a WorkStarted raise."""
-    import stucco_drake.bor_cli
-    import stucco_drake.bor_episode
+    import stucco_drake.bor.cli
+    import stucco_drake.bor.episode
     import stucco_drake.eval.cli_table
     import stucco_drake.scenes
     import stucco_drake.scenes.meshcat_session
@@ -38,8 +38,8 @@ def tripwire(monkeypatch):
     for module, name in [
         (stucco_drake.scenes, "build_scene"),  # sim
         (stucco_drake.scenes.meshcat_session, "start_meshcat"),  # sim, run
-        (stucco_drake.bor_episode, "run_episode"),  # run
-        (stucco_drake.bor_cli, "bor_graphviz"),  # diagram
+        (stucco_drake.bor.episode, "run_episode"),  # run
+        (stucco_drake.bor.cli, "bor_graphviz"),  # diagram
         (stucco_drake.eval.cli_table, "make_table"),  # table
         (stucco_drake.sweep_cli, "run_sweep"),  # sweep
     ]:

@@ -27,7 +27,8 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 from pydrake.trajectories import PiecewisePolynomial
 
-from stucco_drake.models import (
+from stucco_drake.robot.gripper_samples import sample_gripper_surface
+from stucco_drake.robot.models import (
     BUBBLE_GRIPPER_URL,
     bubble_bodies,
     configure_parser,
@@ -49,7 +50,6 @@ from stucco_drake.systems.contact_isolator import (
     pose_from_vector,
     pose_vector,
 )
-from stucco_drake.systems.gripper_samples import sample_gripper_surface
 from stucco_drake.systems.observed_robot import ObservedRobot
 
 H = 1e-3  # plant, estimator and detector period (s)

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 from pydrake.math import RigidTransform
 
+from stucco_drake.bor.grasp import build_grasp_scene, execute_grasp, geometric_check
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
-from stucco_drake.grasp import build_grasp_scene, execute_grasp, geometric_check
 from stucco_drake.scenes import load_scene
 from stucco_drake.scenes.playback import make_simulator
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from stucco_drake.systems.gripper_samples import reachable_samples, sample_gripper_surface
+from stucco_drake.robot.gripper_samples import reachable_samples, sample_gripper_surface
 
 
 def two_plates(gap: float):

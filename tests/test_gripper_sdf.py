@@ -14,9 +14,9 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, CoulombFriction
 from pydrake.multibody.tree import SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
-import stucco_drake.gripper_sdf as gripper_sdf
+import stucco_drake.robot.gripper_sdf as gripper_sdf
 from stucco_drake.core import GridSdf, RobotPenetration
-from stucco_drake.gripper_sdf import (
+from stucco_drake.robot.gripper_sdf import (
     GripperDistance,
     _model_files,
     default_cache_dir,
@@ -25,7 +25,7 @@ from stucco_drake.gripper_sdf import (
     gripper_model_hash,
     gripper_penetration,
 )
-from stucco_drake.models import MODELS_DIR
+from stucco_drake.robot.models import MODELS_DIR
 
 RESOLUTION = 0.004
 BAND = max(0.005, 3 * RESOLUTION)  # gripper_grid_sdf's default band at this resolution

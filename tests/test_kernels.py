@@ -26,7 +26,7 @@ OTHER_CPU = {
 _EPISODE = textwrap.dedent("""
     import json, sys
     from stucco_drake import kernels
-    from stucco_drake.bor_log import log_penetration, record_episode
+    from stucco_drake.bor.log import log_penetration, record_episode
     from stucco_drake.eval.replay import replay
 
     log = record_episode("FB", 5, n_actions=3)

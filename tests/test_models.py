@@ -1,4 +1,4 @@
-"""Tests for the model files under models/ and for stucco_drake.models.
+"""Tests for the model files under models/ and for stucco_drake.robot.models.
 
 Offline by construction: every Parser goes through ``dut.configure_parser``, which drops Drake's
 download-only ``drake_models`` package, so a stray reference to it fails at once (tested below).
@@ -20,7 +20,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from stucco_drake import models as dut
+from stucco_drake.robot import models as dut
 
 PLANT_CONFIG = dict(
     time_step=1e-3,

@@ -362,7 +362,7 @@ def test_object_pushed_off_the_table_is_still_an_object():
     and the log's per-object records then lost it); the table itself never counts."""
     from pydrake.math import RigidTransform
 
-    from stucco_drake.bor import object_surfaces
+    from stucco_drake.bor.diagram import object_surfaces
 
     built = build_scene(load_scene("SELECT3"))
     context = built.diagram.CreateDefaultContext()

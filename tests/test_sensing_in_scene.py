@@ -35,8 +35,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
-from stucco_drake.bor import _arm_selectors
-from stucco_drake.models import bubble_bodies, iiwa_observed_robot_arguments
+from stucco_drake.bor.diagram import _arm_selectors
+from stucco_drake.robot.models import bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import build_scene, load_scene_text
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor

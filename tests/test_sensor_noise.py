@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 import stucco_drake  # noqa: F401  (pins the numeric kernels before numpy loads)
-from stucco_drake.bor import build_bor_diagram
-from stucco_drake.bor_episode import make_bor_simulator
+from stucco_drake.bor.diagram import build_bor_diagram
+from stucco_drake.bor.episode import make_bor_simulator
 from stucco_drake.scenes import load_scene
 from stucco_drake.scenes.sensor_noise import REAL_IIWA, with_sensor_noise
 from stucco_drake.systems.contact_detector import calibrate_residual_statistics

@@ -134,7 +134,7 @@ def test_estimate_body_sits_inside_the_outline(meshcat):
 
 
 def test_a_scene_opens_looking_into_the_cupboard_over_its_walls(meshcat):
-    from stucco_drake.bor import object_surfaces
+    from stucco_drake.bor.diagram import object_surfaces
 
     built = build_scene(load_scene("FB"), meshcat=meshcat)
     x, z, minus_y = unpack(meshcat._GetPackedProperty("/Cameras/default/rotated/<object>",

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
 import sysconfig
@@ -34,9 +35,14 @@ def _result_line(stdout: str) -> str:
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
+    # Built from a copy of the checkout: setuptools' build folder stays out of it, and no stale
+    # build output of an earlier layout can slip into the wheel.
+    source = out / "source"
+    shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(
+        ".git", ".venv", "build", "out", "*.egg-info", "__pycache__", ".cache"))  # fmt: skip
     subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation",
-         "--wheel-dir", str(out), str(REPO)],
+         "--wheel-dir", str(out), str(source)],
         check=True, capture_output=True, text=True,
     )  # fmt: skip
     (path,) = out.glob("stucco_drake-*.whl")
@@ -55,6 +61,9 @@ def test_wheel_ships_every_package_model_and_scene(wheel):
 
 
 def test_installed_wheel_runs_an_episode_from_another_folder(wheel, tmp_path):
+    # Nothing of the checkout on the path, for pip and the runs alike.
+    env = {**os.environ, "STUCCO_DRAKE_CACHE": str(tmp_path / "cache")}
+    env.pop("PYTHONPATH", None)
     env_dir = tmp_path / "venv"
     venv.create(env_dir, with_pip=True)
     python = env_dir / "bin" / "python"
@@ -66,17 +75,16 @@ def test_installed_wheel_runs_an_episode_from_another_folder(wheel, tmp_path):
     Path(purelib, "_reused_packages.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     subprocess.run(
         [str(python), "-m", "pip", "install", "--quiet", "--no-deps", "--no-index", str(wheel)],
-        check=True, capture_output=True, text=True,
+        env=env, check=True, capture_output=True, text=True,
     )  # fmt: skip
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    env = {**os.environ, "STUCCO_DRAKE_CACHE": str(tmp_path / "cache")}
-    env.pop("PYTHONPATH", None)
     located = subprocess.run(
-        [str(python), "-c", "import stucco_drake.models as m; print(m.MODELS_DIR)"],
-        cwd=elsewhere, env=env, check=True, capture_output=True, text=True,
-    ).stdout.strip()  # fmt: skip
-    assert Path(located).is_relative_to(env_dir), located
+        [str(python), "-c", "import stucco_drake.robot.models as m; print(m.MODELS_DIR)"],
+        cwd=elsewhere, env=env, capture_output=True, text=True,
+    )  # fmt: skip
+    assert located.returncode == 0, located.stderr[-2000:]
+    assert Path(located.stdout.strip()).is_relative_to(env_dir), located.stdout
     installed = subprocess.run(
         [str(env_dir / "bin" / "stucco-drake"), *COMMAND],
         cwd=elsewhere, env=env, capture_output=True, text=True,

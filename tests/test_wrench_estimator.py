@@ -18,7 +18,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
 from stucco_drake.core.detection import ResidualStatistics
-from stucco_drake.models import iiwa_observed_robot_arguments
+from stucco_drake.robot.models import iiwa_observed_robot_arguments
 from stucco_drake.systems.contact_detector import (
     FINGERS_NOMINAL,
     Q_NOMINAL,

@@ -88,7 +88,7 @@ def replay_penetration(source: EpisodeSource, log: EpisodeLog, method: str, dx_m
 #: Stream K of a table seeds every tracker's generator with the episode's seed + K times this
 #: (stream 0, the default, with the episode's seed itself).
 STREAM_STRIDE = 1000
-#: Where a table's grasps are made (see :func:`~stucco_drake.bor_log.grasp_from_log`).
+#: Where a table's grasps are made (see :func:`~stucco_drake.bor.log.grasp_from_log`).
 TARGET_ESTIMATORS = ("rules", "hypotheses")
 
 
@@ -99,7 +99,7 @@ def replay_cached(task: tuple[str, int, str], out: str, sources: Sources,
     pxpen and grasp, contact motion ``dx_model``, for STUCCO ``stucco_params`` (None: the
     paper's Table I), and the trackers' generator seeded by ``filter_stream`` (see
     :data:`STREAM_STRIDE`); the grasp at ``target_estimator``'s estimate (``"rules"``, Table
-    II's, or ``"hypotheses"``; see :func:`~stucco_drake.bor_log.grasp_from_log`) (runs in a
+    II's, or ``"hypotheses"``; see :func:`~stucco_drake.bor.log.grasp_from_log`) (runs in a
     worker)."""
     scene, seed, method = task
     log, source = load_cached_log(out, scene, seed), sources[scene]

@@ -41,7 +41,7 @@ from pydrake.systems.controllers import InverseDynamicsController
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import MatrixGain
 
-from stucco_drake.models import add_iiwa14_with_bubble_gripper, configure_parser
+from stucco_drake.robot.models import add_iiwa14_with_bubble_gripper, configure_parser
 from stucco_drake.scenes.meshcat_session import show_over_the_shoulder
 from stucco_drake.scenes.primitives import add_primitive
 from stucco_drake.scenes.scene_file import ControlParams, Primitive, SceneFile, SceneFileError

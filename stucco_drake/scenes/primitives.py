@@ -11,7 +11,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
-from stucco_drake.models import configure_parser
+from stucco_drake.robot.models import configure_parser
 from stucco_drake.scenes.scene_file import Primitive
 
 _TEMPLATE = """<?xml version="1.0"?>

@@ -23,7 +23,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 
 from stucco_drake.core import SoftTrackingParams
 from stucco_drake.inputs import InputError
-from stucco_drake.models import resolve_model_url
+from stucco_drake.robot.models import resolve_model_url
 
 
 def _find_diagrams_dir() -> Path:

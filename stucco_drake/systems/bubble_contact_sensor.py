@@ -17,7 +17,7 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.systems.framework import LeafSystem
 
-from stucco_drake.gripper_sdf import ellipsoid_signed_distance
+from stucco_drake.robot.gripper_sdf import ellipsoid_signed_distance
 
 
 def _surface_moments(surface):

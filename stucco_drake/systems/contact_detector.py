@@ -43,7 +43,7 @@ from stucco_drake.core.detection import (
     chi2_threshold,
     fit_residual_statistics,
 )
-from stucco_drake.models import (
+from stucco_drake.robot.models import (
     IIWA_ARM_JOINTS,
     MODELS_DIR,
     add_iiwa14_with_bubble_gripper,

@@ -1,6 +1,6 @@
 """Contact isolation on the bubble gripper: where on its surface did the detected contact happen?
 
-- The candidate points come from :mod:`stucco_drake.systems.gripper_samples` (the gripper's
+- The candidate points come from :mod:`stucco_drake.robot.gripper_samples` (the gripper's
   surface where objects can reach it, and its convex hull's bridging faces).
 - :class:`GripperPoseFromState`: forward kinematics of the measured arm state to the pose vector
   the isolator reads.
@@ -26,7 +26,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from stucco_drake.core.contact_isolation import ContactParticleFilter
-from stucco_drake.systems.gripper_samples import (
+from stucco_drake.robot.gripper_samples import (
     reachable_samples,
     sample_gripper_surface,
     sample_hull_bridges,

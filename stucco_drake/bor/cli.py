@@ -63,17 +63,17 @@ def _grasp_hook(enabled: bool):
     if not enabled:
         return None
     try:
-        import stucco_drake.grasp  # noqa: F401
+        import stucco_drake.bor.grasp  # noqa: F401
     except ImportError:
-        print("grasp: stucco_drake.grasp is not available, GS is n/a", file=sys.stderr)
+        print("grasp: stucco_drake.bor.grasp is not available, GS is n/a", file=sys.stderr)
         return None
-    from stucco_drake.bor_episode import executor_grasp
+    from stucco_drake.bor.episode import executor_grasp
 
     return executor_grasp
 
 
 def run_bor(args: argparse.Namespace) -> int:
-    from stucco_drake.bor_episode import run_episode
+    from stucco_drake.bor.episode import run_episode
     from stucco_drake.scenes import load_scene, scene_paths
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 
@@ -127,7 +127,7 @@ def plot_episode(result, path: str | Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from stucco_drake.bor import PosedSurface
+    from stucco_drake.bor.diagram import PosedSurface
     from stucco_drake.systems.contact_tracking_visualizer import (
         OUTLINE_COLOR,
         SEGMENT_PALETTE,
@@ -204,7 +204,7 @@ def normalized_graphviz(text: str) -> str:
 def bor_graphviz(scene="FB", method: str = "stucco") -> str:
     """The normalized Graphviz source of the BOR Diagram of ``scene`` (a SceneFile or a scene
     name)."""
-    from stucco_drake.bor import build_bor_diagram
+    from stucco_drake.bor.diagram import build_bor_diagram
 
     diagram = build_bor_diagram(scene, method).diagram
     return normalized_graphviz(diagram.GetGraphvizString(max_depth=DIAGRAM_DEPTH))

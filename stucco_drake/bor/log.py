@@ -26,19 +26,24 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from stucco_drake import kernels
-from stucco_drake.bor import build_bor_diagram, collision_shapes, object_surfaces, target_shape
-from stucco_drake.bor_episode import make_bor_simulator, run_episode
+from stucco_drake.bor.diagram import (
+    build_bor_diagram,
+    collision_shapes,
+    object_surfaces,
+    target_shape,
+)
+from stucco_drake.bor.episode import make_bor_simulator, run_episode
+from stucco_drake.bor.grasp import build_grasp_scene, estimate_clutter, grasp_at_pose
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sets import PAPER_SCENES, scene_set
 from stucco_drake.eval.sources import EpisodeSource
 from stucco_drake.eval.target_estimates import hypotheses_estimate, rules_estimate
-from stucco_drake.grasp import build_grasp_scene, estimate_clutter, grasp_at_pose
-from stucco_drake.gripper_sdf import gripper_penetration
+from stucco_drake.robot.gripper_samples import sample_gripper_surface
+from stucco_drake.robot.gripper_sdf import gripper_penetration
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene, resolve_scene_path, scene_paths
 from stucco_drake.scenes.builder import yaw_of
-from stucco_drake.systems.gripper_samples import sample_gripper_surface
 
 #: Half-width (m) of the uniform noise added to every action axis (paper Sec. V).
 ACTION_NOISE = 5e-4
@@ -127,7 +132,7 @@ class EpisodeRecorder:
     """Collects an :class:`EpisodeLog` action by action from a running BOR Diagram.
 
     Whatever drives the simulation (a fixed action list through
-    :func:`~stucco_drake.bor_episode.run_episode`, or a closed-loop policy) calls
+    :func:`~stucco_drake.bor.episode.run_episode`, or a closed-loop policy) calls
     :meth:`on_action` once per action, after that action's contacts are formed, then
     :meth:`log`. Per action it keeps the end-effector pose, the detected contacts with their
     dx, the object each truly touched, every object's planar pose and the gripper's distance
@@ -253,7 +258,7 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
 
     The grasp then runs in a freshly built grasp scene set to the logged plant state, that of
     ``scene`` (a scene name or file; default: the shipped scene named ``log.scene``). Returns
-    the :class:`~stucco_drake.grasp.GraspResult`, or None when no segment can be fitted (no
+    the :class:`~stucco_drake.bor.grasp.GraspResult`, or None when no segment can be fitted (no
     grasp is attempted: a failure).
     """
     built = _grasp_scene(log.scene if scene is None else str(scene))

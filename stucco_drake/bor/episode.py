@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from stucco_drake.bor import BorDiagram, build_bor_diagram, object_surfaces
+from stucco_drake.bor.diagram import BorDiagram, build_bor_diagram, object_surfaces
 from stucco_drake.core.metrics import contact_error, fowlkes_mallows, target_pose_error
 from stucco_drake.scenes import SceneFile, load_scene
 from stucco_drake.scenes.builder import yaw_of
@@ -29,9 +29,9 @@ _PIPELINE_STEPS = 5
 
 def executor_grasp(bor: BorDiagram, simulator: Simulator, estimate):
     """The grasp hook of the BOR task: grasp at the estimated target pose with
-    :func:`stucco_drake.grasp.grasp_estimate` (which continues from the simulator's state in a
+    :func:`stucco_drake.bor.grasp.grasp_estimate` (which continues from the simulator's state in a
     scene of its own). Without an estimate there is nothing to grasp: returns False."""
-    from stucco_drake.grasp import grasp_estimate
+    from stucco_drake.bor.grasp import grasp_estimate
 
     if estimate is None:
         return False

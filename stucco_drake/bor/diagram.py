@@ -11,7 +11,7 @@ sequence; see :mod:`stucco_drake.scenes.builder`) and adds around it, with
 so that the tracker and the pose estimator update once per action, on the scene's action
 clock. Only the bubble sensor and the ground-truth labeller read the plant's contact results;
 the wrench estimator sees the arm's state and torques alone. :func:`run_episode` (in
-:mod:`stucco_drake.bor_episode`) plays a scene through it and scores the result.
+:mod:`stucco_drake.bor.episode`) plays a scene through it and scores the result.
 
 Units: m, rad, s; poses in the world frame; quaternions w-first.
 """
@@ -26,13 +26,13 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
 
+from stucco_drake.bor.grasp import build_grasp_scene
 from stucco_drake.contact_tracking import Tactile, add_contact_tracking
 from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
-from stucco_drake.grasp import build_grasp_scene
-from stucco_drake.gripper_sdf import gripper_penetration
-from stucco_drake.models import IIWA_ARM_JOINTS, bubble_bodies, iiwa_observed_robot_arguments
+from stucco_drake.robot.gripper_sdf import gripper_penetration
+from stucco_drake.robot.models import IIWA_ARM_JOINTS, bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.action_contacts_assembler import (

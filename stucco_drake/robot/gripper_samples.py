@@ -18,7 +18,11 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 from pydrake.systems.framework import DiagramBuilder
 from scipy.spatial import ConvexHull, cKDTree
 
-from stucco_drake.models import BUBBLE_GRIPPER_URL, FLANGE_TO_GRIPPER_FRAME_Z, configure_parser
+from stucco_drake.robot.models import (
+    BUBBLE_GRIPPER_URL,
+    FLANGE_TO_GRIPPER_FRAME_Z,
+    configure_parser,
+)
 
 _INSIDE_TOLERANCE = 1e-4  # m: samples deeper than this inside another shape are hidden
 

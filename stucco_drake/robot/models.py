@@ -23,11 +23,11 @@ PACKAGE_NAME = "stucco_drake_models"
 
 def _find_models_dir() -> Path:
     """The repository's ``models/`` folder, else its copy shipped in the wheel (``_models``)."""
-    here = Path(__file__).resolve().parent
-    source_tree = here.parent / "models"
+    package = Path(__file__).resolve().parents[1]  # stucco_drake/
+    source_tree = package.parent / "models"
     if (source_tree / "package.xml").is_file():
         return source_tree
-    return here / "_models"
+    return package / "_models"
 
 
 MODELS_DIR: Path = _find_models_dir()

@@ -38,7 +38,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.sdf import GridSdf
-from stucco_drake.models import BUBBLE_GRIPPER_URL, MODELS_DIR, PACKAGE_NAME, configure_parser
+from stucco_drake.robot.models import BUBBLE_GRIPPER_URL, MODELS_DIR, PACKAGE_NAME, configure_parser
 
 #: Bump when the way grids are computed changes, so that old cache files are not reused.
 _ALGORITHM_VERSION = 1
