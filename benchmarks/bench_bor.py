@@ -37,8 +37,8 @@ REPO = Path(__file__).resolve().parents[1]
 class SystemTimer:
     """Exclusive wall time of each system class's Python callbacks.
 
-    Wraps, before any Diagram is built, every private method of the given classes (update
-    handlers, output calcs and the closures ``_make_output`` returns); a call's time is charged
+    Wraps, before any Diagram is built, every private method and every output calc
+    (``calc_<port>``) of the given classes; a call's time is charged
     to its class minus the time of wrapped calls nested inside it.
     """
 
@@ -47,10 +47,11 @@ class SystemTimer:
         self._stack = []
         for cls in classes:
             for name, attr in list(vars(cls).items()):
-                if name.startswith("_") and not name.startswith("__") and inspect.isfunction(attr):
-                    setattr(cls, name, self._wrap(cls.__name__, attr, name == "_make_output"))
+                timed = name.startswith(("_", "calc_")) and not name.startswith("__")
+                if timed and inspect.isfunction(attr):
+                    setattr(cls, name, self._wrap(cls.__name__, attr))
 
-    def _wrap(self, owner: str, fn, returns_callback: bool):
+    def _wrap(self, owner: str, fn):
         @functools.wraps(fn)
         def timed(*args, **kwargs):
             self._stack.append(0.0)
@@ -63,8 +64,6 @@ class SystemTimer:
                 self.seconds[owner] += elapsed - nested
                 if self._stack:
                     self._stack[-1] += elapsed
-            if returns_callback and callable(result):
-                return self._wrap(owner, result, False)
             return result
 
         return timed
@@ -80,6 +79,7 @@ def _systems():
     from stucco_drake.systems.contact_isolator import ContactIsolator, GripperPoseFromState
     from stucco_drake.systems.grasp_executor import GraspExecutor
     from stucco_drake.systems.planar_controller import (
+        ActionClock,
         PlanarActionSequence,
         PlanarEndEffectorController,
     )
@@ -90,7 +90,7 @@ def _systems():
     return [ExternalWrenchEstimator, ContactDetector, ContactIsolator, GripperPoseFromState,
             BubbleContactSensor, ActionContactsAssembler, SoftTrackingFilter,
             TargetPoseEstimator, PlanarEndEffectorController, PlanarActionSequence,
-            GraspExecutor]  # fmt: skip
+            ActionClock, GraspExecutor]  # fmt: skip
 
 
 def _print_shares(timer: SystemTimer, wall: float, rest: str) -> None:

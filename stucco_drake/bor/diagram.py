@@ -24,7 +24,7 @@ import numpy as np
 from pydrake.geometry import Box, Cylinder
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from stucco_drake.bor.grasp import build_grasp_scene
 from stucco_drake.contact_tracking import Tactile, add_contact_tracking
@@ -48,6 +48,7 @@ from stucco_drake.systems.contact_detector import (
 from stucco_drake.systems.contact_isolator import ContactIsolator
 from stucco_drake.systems.contact_tracking_visualizer import ContactTrackingVisualizer
 from stucco_drake.systems.observed_robot import ObservedRobot
+from stucco_drake.systems.planar_controller import ActionClock
 from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
 from stucco_drake.systems.target_pose_estimator import TargetPoseEstimator
 from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
@@ -215,24 +216,6 @@ class RobotObjectContacts:
     def label(self, points, plant_state) -> tuple:
         """The true contact nearest each of ``points`` (n, 3) at ``plant_state``."""
         return nearest_truth(np.asarray(points, dtype=float), self.contacts(plant_state))
-
-
-class ActionClock(LeafSystem):
-    """Output ``action_index``: floor(t / duration) as a 1-vector, the action under way.
-
-    The scene's built-in action sequence is the action clock of a BOR Diagram playing a fixed
-    list; with external actions (one ``planar_step`` per action, fed by a policy) the detector
-    still needs it, and the planar controller starts a new action on the same grid.
-    """
-
-    def __init__(self, duration: float):
-        super().__init__()
-        self._duration = float(duration)
-        self.DeclareVectorOutputPort("action_index", 1, self._calc)
-
-    def _calc(self, context, output):
-        # The same tolerance as the scene's action sequence: t = k * duration counts as k.
-        output.SetFromVector([float(np.floor(context.get_time() / self._duration + 1e-6))])
 
 
 # --------------------------------------------------------------------------------- building

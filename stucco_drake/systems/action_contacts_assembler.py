@@ -132,20 +132,14 @@ class ActionContactsAssembler(LeafSystem):
         ticket = {self.abstract_state_ticket(self._state)}
         self.DeclareAbstractOutputPort(
             "action_contacts", lambda: AbstractValue.Make(ActionContacts()),
-            lambda c, o: o.set_value(self.assembler_state(c).completed),
-            prerequisites_of_calc=ticket,
-        )  # fmt: skip
+            self.calc_action_contacts, prerequisites_of_calc=ticket)  # fmt: skip
         self.DeclareAbstractOutputPort(
             "ee_pose", lambda: AbstractValue.Make(RigidTransform()),
-            lambda c, o: o.set_value(self.assembler_state(c).ee_pose),
-            prerequisites_of_calc=ticket,
-        )  # fmt: skip
+            self.calc_ee_pose, prerequisites_of_calc=ticket)  # fmt: skip
         if self._with_truth:
             self.DeclareAbstractOutputPort(
                 "action_truth", lambda: AbstractValue.Make(()),
-                lambda c, o: o.set_value(self.assembler_state(c).completed_truth),
-                prerequisites_of_calc=ticket,
-            )  # fmt: skip
+                self.calc_action_truth, prerequisites_of_calc=ticket)  # fmt: skip
         self.DeclarePeriodicUnrestrictedUpdateEvent(time_step, 0.0, self._update)
 
     def assembler_state(self, context) -> _AssemblerState:
@@ -153,6 +147,14 @@ class ActionContactsAssembler(LeafSystem):
         actions the detector flagged but the isolator never localised."""
         return context.get_abstract_state(self._state).get_value()
 
+    def calc_action_contacts(self, context, output):
+        output.set_value(self.assembler_state(context).completed)
+
+    def calc_ee_pose(self, context, output):
+        output.set_value(self.assembler_state(context).ee_pose)
+
+    def calc_action_truth(self, context, output):
+        output.set_value(self.assembler_state(context).completed_truth)
     def _update(self, context, state):
         old = self.assembler_state(context)
         new = old

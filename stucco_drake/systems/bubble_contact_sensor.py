@@ -105,22 +105,30 @@ class BubbleContactSensor(LeafSystem):
         # State: [update count, flags (n), points (3n), penetrations (n)].
         self._xd = self.DeclareDiscreteState(1 + 5 * n)
         self._n = n
-        for name, part in (
-            ("bubble_in_contact", slice(1, 1 + n)),
-            ("bubble_contact_points", slice(1 + n, 1 + 4 * n)),
-            ("bubble_penetration", slice(1 + 4 * n, 1 + 5 * n)),
+        self._parts = {"bubble_in_contact": slice(1, 1 + n),
+                       "bubble_contact_points": slice(1 + n, 1 + 4 * n),
+                       "bubble_penetration": slice(1 + 4 * n, 1 + 5 * n)}  # fmt: skip
+        for name, calc in (
+            ("bubble_in_contact", self.calc_bubble_in_contact),
+            ("bubble_contact_points", self.calc_bubble_contact_points),
+            ("bubble_penetration", self.calc_bubble_penetration),
         ):
-            self.DeclareVectorOutputPort(
-                name, part.stop - part.start, self._make_output(part),
-                prerequisites_of_calc={self.xd_ticket()},
-            )  # fmt: skip
+            part = self._parts[name]
+            self.DeclareVectorOutputPort(name, part.stop - part.start, calc,
+                                         prerequisites_of_calc={self.xd_ticket()})  # fmt: skip
         self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update)
 
-    def _make_output(self, part):
-        def calc(context, output):
-            output.SetFromVector(context.get_discrete_state(self._xd).get_value()[part])
+    def _state_part(self, context, name: str) -> np.ndarray:
+        return context.get_discrete_state(self._xd).get_value()[self._parts[name]]
 
-        return calc
+    def calc_bubble_in_contact(self, context, output):
+        output.SetFromVector(self._state_part(context, "bubble_in_contact"))
+
+    def calc_bubble_contact_points(self, context, output):
+        output.SetFromVector(self._state_part(context, "bubble_contact_points"))
+
+    def calc_bubble_penetration(self, context, output):
+        output.SetFromVector(self._state_part(context, "bubble_penetration"))
 
     def measure(self, results: ContactResults, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(penetration (n,), point (n, 3), pressure x area (n,)) of each bubble, no noise.

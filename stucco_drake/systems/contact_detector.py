@@ -115,12 +115,9 @@ class ContactDetector(LeafSystem):
         self._acc = self.DeclareDiscreteState(ActionContactAccumulator.initial_state())
         self._flag = self.DeclareDiscreteState(1)
         self.DeclareStateOutputPort("in_contact", self._flag)
-        self.DeclareAbstractOutputPort(
-            "current_action", lambda: AbstractValue.Make(ActionContact()), self._calc_current
-        )
-        self.DeclareAbstractOutputPort(
-            "completed_action", lambda: AbstractValue.Make(ActionContact()), self._calc_completed
-        )
+        for name, calc in (("current_action", self.calc_current_action),
+                           ("completed_action", self.calc_completed_action)):  # fmt: skip
+            self.DeclareAbstractOutputPort(name, lambda: AbstractValue.Make(ActionContact()), calc)
         self.DeclarePeriodicDiscreteUpdateEvent(time_step, 0.0, self._update)
 
     def _read(self, context, port) -> np.ndarray:
@@ -136,11 +133,11 @@ class ContactDetector(LeafSystem):
         discrete_state.get_mutable_vector(self._acc).SetFromVector(new)
         discrete_state.get_mutable_vector(self._flag).SetFromVector([float(in_contact)])
 
-    def _calc_current(self, context, output):
+    def calc_current_action(self, context, output):
         acc = context.get_discrete_state(self._acc).get_value()
         output.set_value(ActionContactAccumulator.current(acc, self.min_contact_steps))
 
-    def _calc_completed(self, context, output):
+    def calc_completed_action(self, context, output):
         acc = context.get_discrete_state(self._acc).get_value()
         output.set_value(ActionContactAccumulator.completed(acc, self.min_contact_steps))
 

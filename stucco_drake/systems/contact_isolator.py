@@ -262,46 +262,57 @@ class ContactIsolator(LeafSystem):
             )
         self._state = self.DeclareAbstractState(AbstractValue.Make(_IsolatorState()))
         ticket = {self.abstract_state_ticket(self._state)}
-        for name, size, get in (
-            ("has_contact", 1, lambda s: [float(s.source != SOURCE_NONE)]),
-            ("contact_point", 3, lambda s: s.point_W),
-            ("contact_point_gripper", 3, lambda s: s.point_G),
-            ("isolation_cost", 1, lambda s: [s.cost]),
-            ("contact_source", 1, lambda s: [s.source]),
+        for name, size, calc in (
+            ("has_contact", 1, self.calc_has_contact),
+            ("contact_point", 3, self.calc_contact_point),
+            ("contact_point_gripper", 3, self.calc_contact_point_gripper),
+            ("isolation_cost", 1, self.calc_isolation_cost),
+            ("contact_source", 1, self.calc_contact_source),
         ):
-            self.DeclareVectorOutputPort(name, size, self._make_output(get),
-                                         prerequisites_of_calc=ticket)  # fmt: skip
+            self.DeclareVectorOutputPort(name, size, calc, prerequisites_of_calc=ticket)
         # The spread is costly and only diagnostic: computed once per state, when asked for.
         self._spread_cache = self.DeclareCacheEntry(
             "contact spread", ValueProducer(
                 allocate=lambda: AbstractValue.Make(0.0),
                 calc=lambda c, v: v.set_value(self._spread(self._get(c)))),
             prerequisites_of_calc=ticket)  # fmt: skip
-        self.DeclareVectorOutputPort(
-            "contact_spread", 1,
-            lambda c, o: o.SetFromVector([self._spread_cache.Eval(c)]),
-            prerequisites_of_calc={self._spread_cache.ticket()})  # fmt: skip
-        self.DeclareVectorOutputPort(
-            "contact_ambiguous", 1,
-            lambda c, o: o.SetFromVector(
-                [float(self._spread_cache.Eval(c) > self._ambiguity_distance)]),
-            prerequisites_of_calc={self._spread_cache.ticket()})  # fmt: skip
+        spread_ticket = {self._spread_cache.ticket()}
+        self.DeclareVectorOutputPort("contact_spread", 1, self.calc_contact_spread,
+                                     prerequisites_of_calc=spread_ticket)  # fmt: skip
+        self.DeclareVectorOutputPort("contact_ambiguous", 1, self.calc_contact_ambiguous,
+                                     prerequisites_of_calc=spread_ticket)  # fmt: skip
         self.DeclareAbstractOutputPort(
-            "contact_points",
-            lambda: AbstractValue.Make([np.zeros(3)]),
-            lambda c, o: o.set_value(list(self._get(c).points_W)),
-            prerequisites_of_calc=ticket,
-        )
+            "contact_points", lambda: AbstractValue.Make([np.zeros(3)]),
+            self.calc_contact_points, prerequisites_of_calc=ticket)  # fmt: skip
         self.DeclarePeriodicUnrestrictedUpdateEvent(time_step, 0.0, self._update)
 
     def _get(self, context) -> _IsolatorState:
         return context.get_abstract_state(self._state).get_value()
 
-    def _make_output(self, get):
-        def calc(context, output):
-            output.SetFromVector(np.asarray(get(self._get(context)), dtype=float))
+    # ---------------------------------------------------------------------------------- outputs
+    def calc_has_contact(self, context, output):
+        output.SetFromVector([float(self._get(context).source != SOURCE_NONE)])
 
-        return calc
+    def calc_contact_point(self, context, output):
+        output.SetFromVector(np.asarray(self._get(context).point_W, dtype=float))
+
+    def calc_contact_point_gripper(self, context, output):
+        output.SetFromVector(np.asarray(self._get(context).point_G, dtype=float))
+
+    def calc_isolation_cost(self, context, output):
+        output.SetFromVector([float(self._get(context).cost)])
+
+    def calc_contact_source(self, context, output):
+        output.SetFromVector([float(self._get(context).source)])
+
+    def calc_contact_spread(self, context, output):
+        output.SetFromVector([self._spread_cache.Eval(context)])
+
+    def calc_contact_ambiguous(self, context, output):
+        output.SetFromVector([float(self._spread_cache.Eval(context) > self._ambiguity_distance)])
+
+    def calc_contact_points(self, context, output):
+        output.set_value(list(self._get(context).points_W))
 
     def _read(self, context, port) -> np.ndarray:
         return eval_finite("ContactIsolator", context, port)

@@ -119,9 +119,9 @@ class GraspExecutor(LeafSystem):
         # spares recomputing them at each integrator stage of every plant step.
         state = {self.discrete_state_ticket(self._state), self.discrete_state_ticket(self._v_state)}
         command = self.input_port_ticket(self.get_input_port(0).get_index())
-        self.DeclareVectorOutputPort("desired_state", self._nq + self._nv, self._calc_desired,
+        self.DeclareVectorOutputPort("desired_state", self._nq + self._nv, self.calc_desired_state,
                                      prerequisites_of_calc=state | {command})
-        self.DeclareVectorOutputPort("grasp_phase", 1, self._calc_phase,
+        self.DeclareVectorOutputPort("grasp_phase", 1, self.calc_grasp_phase,
                                      prerequisites_of_calc=state | {self.time_ticket()})
 
     @property
@@ -263,7 +263,7 @@ class GraspExecutor(LeafSystem):
         discrete_state.set_value(self._v_state, np.concatenate(
             [v, np.full(len(self._finger_q), f), [f_rate]]))
 
-    def _calc_desired(self, context, output: BasicVector):
+    def calc_desired_state(self, context, output: BasicVector):
         upstream = self.get_input_port(0).Eval(context)
         s = context.get_discrete_state(self._state).value()
         if s[_MODE] == 0.0:
@@ -277,7 +277,7 @@ class GraspExecutor(LeafSystem):
         x[self._nq + self._finger_v] = vs[-1]
         output.SetFromVector(x)
 
-    def _calc_phase(self, context, output: BasicVector):
+    def calc_grasp_phase(self, context, output: BasicVector):
         s = context.get_discrete_state(self._state).value()
         if s[_MODE] == 0.0:
             output.SetFromVector([-1.0])

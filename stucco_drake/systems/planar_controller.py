@@ -171,9 +171,9 @@ class PlanarEndEffectorController(LeafSystem):
         # Both outputs depend on the discrete state only; saying so spares recomputing them
         # at every plant step.
         only_state = {self.discrete_state_ticket(self._state)}
-        self.DeclareVectorOutputPort("desired_state", self._nq + self._nv, self._calc_desired,
+        self.DeclareVectorOutputPort("desired_state", self._nq + self._nv, self.calc_desired_state,
                                      prerequisites_of_calc=only_state)
-        self.DeclareVectorOutputPort("planar_goal", 2, self._calc_goal,
+        self.DeclareVectorOutputPort("planar_goal", 2, self.calc_planar_goal,
                                      prerequisites_of_calc=only_state)
 
     def _split(self, x):
@@ -244,14 +244,14 @@ class PlanarEndEffectorController(LeafSystem):
             return xy_ref, v_ref
         return xy_meas + unit * allowed, np.zeros(2)
 
-    def _calc_desired(self, context, output: BasicVector):
+    def calc_desired_state(self, context, output: BasicVector):
         q, v, _, _, _ = self._split(context.get_discrete_state(self._state).value())
         x = np.concatenate([self._hold, np.zeros(self._nv)])
         x[self._kin.q_index] = q
         x[self._nq + self._kin.v_index] = v
         output.SetFromVector(x)
 
-    def _calc_goal(self, context, output: BasicVector):
+    def calc_planar_goal(self, context, output: BasicVector):
         output.SetFromVector(self._split(context.get_discrete_state(self._state).value())[3])
 
 
@@ -267,17 +267,35 @@ class PlanarActionSequence(LeafSystem):
         super().__init__()
         self._steps = np.asarray(steps, dtype=float).reshape(-1, 2)
         self._duration = float(duration)
-        self.DeclareVectorOutputPort("planar_step", 2, self._calc_step)
-        self.DeclareVectorOutputPort("action_index", 1, self._calc_index)
+        self.DeclareVectorOutputPort("planar_step", 2, self.calc_planar_step)
+        self.DeclareVectorOutputPort("action_index", 1, self.calc_action_index)
 
     def _index(self, context) -> int:
         # A small tolerance so that t = k * duration, computed in floating point, counts as k.
         k = int(np.floor(context.get_time() / self._duration + 1e-6))
         return min(k, len(self._steps))
 
-    def _calc_step(self, context, output: BasicVector):
+    def calc_planar_step(self, context, output: BasicVector):
         k = self._index(context)
         output.SetFromVector(self._steps[k] if k < len(self._steps) else np.zeros(2))
 
-    def _calc_index(self, context, output: BasicVector):
+    def calc_action_index(self, context, output: BasicVector):
         output.SetFromVector([float(self._index(context))])
+class ActionClock(LeafSystem):
+    """Output ``action_index``: floor(t / duration) as a 1-vector, the action under way.
+
+    The scene's built-in action sequence is the action clock of a BOR Diagram playing a fixed
+    list; with external actions (one ``planar_step`` per action, fed by a policy) the detector
+    still needs it, and the planar controller starts a new action on the same grid.
+    """
+
+    def __init__(self, duration: float):
+        super().__init__()
+        self._duration = float(duration)
+        self.DeclareVectorOutputPort("action_index", 1, self.calc_action_index)
+
+    def calc_action_index(self, context, output):
+        # The same tolerance as the scene's action sequence: t = k * duration counts as k.
+        output.SetFromVector([float(np.floor(context.get_time() / self._duration + 1e-6))])
+
+

@@ -102,18 +102,18 @@ class SoftTrackingFilter(LeafSystem):
         initial = TrackingState(copy.deepcopy(tracker), np.random.default_rng(seed))
         self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
         self.DeclareAbstractOutputPort(
-            "map_points", lambda: AbstractValue.Make(np.zeros((0, 3))), self._calc_points
+            "map_points", lambda: AbstractValue.Make(np.zeros((0, 3))), self.calc_map_points
         )
         self.DeclareAbstractOutputPort(
             "segment_labels",
             lambda: AbstractValue.Make(np.zeros(0, dtype=np.int64)),
-            self._calc_labels,
+            self.calc_segment_labels,
         )
         self.DeclareAbstractOutputPort(
-            "tracked_action", lambda: AbstractValue.Make(ActionContacts()), self._calc_action
+            "tracked_action", lambda: AbstractValue.Make(ActionContacts()), self.calc_tracked_action
         )
         self.DeclareAbstractOutputPort(
-            "point_spread", lambda: AbstractValue.Make(np.zeros(0)), self._calc_point_spread
+            "point_spread", lambda: AbstractValue.Make(np.zeros(0)), self.calc_point_spread
         )
         self.DeclarePeriodicUnrestrictedUpdateEvent(check_period, 0.0, self._on_step)
 
@@ -143,16 +143,16 @@ class SoftTrackingFilter(LeafSystem):
         updated.n_updates += 1
         state.get_mutable_abstract_state(int(self._state)).set_value(updated)
 
-    def _calc_points(self, context, output):
+    def calc_map_points(self, context, output):
         output.set_value(self.tracking_state(context).tracker.map_points())
 
-    def _calc_labels(self, context, output):
+    def calc_segment_labels(self, context, output):
         output.set_value(np.asarray(self.tracking_state(context).tracker.segment()))
 
-    def _calc_action(self, context, output):
+    def calc_tracked_action(self, context, output):
         output.set_value(self.tracking_state(context).last_action)
 
-    def _calc_point_spread(self, context, output):
+    def calc_point_spread(self, context, output):
         tracker = self.tracking_state(context).tracker
         spread = tracker_spread(tracker)
         output.set_value(np.zeros(tracker.n_contacts) if spread is None else spread)

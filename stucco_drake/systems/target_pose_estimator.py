@@ -140,22 +140,21 @@ class TargetPoseEstimator(LeafSystem):
         initial = EstimatorState(np.random.default_rng(seed), np.zeros((0, 3)))
         self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
         self.DeclareAbstractOutputPort(
-            "target_pose", lambda: AbstractValue.Make(RigidTransform()), self._calc_pose
+            "target_pose", lambda: AbstractValue.Make(RigidTransform()), self.calc_target_pose
         )
         self.DeclareAbstractOutputPort(
-            "estimate", lambda: AbstractValue.Make(None), self._calc_estimate
+            "estimate", lambda: AbstractValue.Make(None), self.calc_estimate
         )
         # Costly and needed only by who asks (a stopping rule, a viewer): computed once per
         # context, when first evaluated, and shared by both ports.
         self._hypotheses = self.DeclareCacheEntry(
             "pose hypotheses", ValueProducer(
-                allocate=lambda: AbstractValue.Make(None), calc=self._calc_pose_hypotheses))
+                allocate=lambda: AbstractValue.Make(None), calc=self._compute_pose_hypotheses))
         self.DeclareAbstractOutputPort(
-            "pose_hypotheses", lambda: AbstractValue.Make(None),
-            lambda c, o: o.set_value(self._hypotheses.Eval(c)),
+            "pose_hypotheses", lambda: AbstractValue.Make(None), self.calc_pose_hypotheses,
             prerequisites_of_calc={self._hypotheses.ticket()})  # fmt: skip
         self.DeclareVectorOutputPort(
-            "target_confidence", 1, self._calc_target_confidence,
+            "target_confidence", 1, self.calc_target_confidence,
             prerequisites_of_calc={self._hypotheses.ticket()})  # fmt: skip
         self.DeclarePeriodicUnrestrictedUpdateEvent(check_period, 0.0, self._on_step)
 
@@ -198,7 +197,7 @@ class TargetPoseEstimator(LeafSystem):
                 pass  # every segment is wider than the target, in pieces too small: keep the last
         state.get_mutable_abstract_state(int(self._state)).set_value(updated)
 
-    def _calc_pose(self, context, output):
+    def calc_target_pose(self, context, output):
         estimate = self.estimator_state(context).estimate
         if estimate is None:
             output.set_value(RigidTransform())
@@ -208,10 +207,10 @@ class TargetPoseEstimator(LeafSystem):
         rotation = RotationMatrix.MakeZRotation(estimate.yaw)
         output.set_value(RigidTransform(rotation, [estimate.x, estimate.y, height]))
 
-    def _calc_estimate(self, context, output):
+    def calc_estimate(self, context, output):
         output.set_value(self.estimator_state(context).estimate)
 
-    def _calc_pose_hypotheses(self, context, output):
+    def _compute_pose_hypotheses(self, context, output):
         state = self.estimator_state(context)
         points = self._points.Eval(context)
         labels = np.asarray(self._labels.Eval(context))
@@ -230,6 +229,9 @@ class TargetPoseEstimator(LeafSystem):
             spread=None if spread is None else spread[:n], free_space=free,
             params=self.hypothesis_params))  # fmt: skip
 
-    def _calc_target_confidence(self, context, output):
+    def calc_pose_hypotheses(self, context, output):
+        output.set_value(self._hypotheses.Eval(context))
+
+    def calc_target_confidence(self, context, output):
         hypotheses = self._hypotheses.Eval(context)
         output.SetFromVector([0.0 if hypotheses is None else hypotheses.confidence])

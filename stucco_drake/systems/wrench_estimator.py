@@ -172,27 +172,34 @@ class ExternalWrenchEstimator(LeafSystem):
         # One state vector (one write per update), laid out as in _StateLayout.
         self._layout = layout = _StateLayout(n)
         self._xd = self.DeclareDiscreteState(layout.size)
-        for name, part in (
-            ("external_joint_torques", layout.r),
-            ("ee_wrench", layout.wrench),
-            ("residual_chi2", layout.chi2),
-            ("ee_position", layout.position),
+        # Outputs read state only: no direct feedthrough, so closing a loop through them
+        # (e.g. into a controller) is fine.
+        ticket = {self.xd_ticket()}
+        for name, part, calc in (
+            ("external_joint_torques", layout.r, self.calc_external_joint_torques),
+            ("ee_wrench", layout.wrench, self.calc_ee_wrench),
+            ("residual_chi2", layout.chi2, self.calc_residual_chi2),
+            ("ee_position", layout.position, self.calc_ee_position),
         ):
-            self.DeclareVectorOutputPort(
-                name,
-                part.stop - part.start,
-                self._make_output(part),
-                # Outputs read state only: no direct feedthrough, so closing a loop through
-                # them (e.g. into a controller) is fine.
-                prerequisites_of_calc={self.xd_ticket()},
-            )
+            self.DeclareVectorOutputPort(name, part.stop - part.start, calc,
+                                         prerequisites_of_calc=ticket)  # fmt: skip
         self.DeclarePeriodicDiscreteUpdateEvent(self.time_step, 0.0, self._update)
 
-    def _make_output(self, part: slice):
-        def calc(context, output):
-            output.SetFromVector(context.get_discrete_state(self._xd).get_value()[part])
+    # ---------------------------------------------------------------------------------- outputs
+    def _state_part(self, context, part: slice) -> np.ndarray:
+        return context.get_discrete_state(self._xd).get_value()[part]
 
-        return calc
+    def calc_external_joint_torques(self, context, output):
+        output.SetFromVector(self._state_part(context, self._layout.r))
+
+    def calc_ee_wrench(self, context, output):
+        output.SetFromVector(self._state_part(context, self._layout.wrench))
+
+    def calc_residual_chi2(self, context, output):
+        output.SetFromVector(self._state_part(context, self._layout.chi2))
+
+    def calc_ee_position(self, context, output):
+        output.SetFromVector(self._state_part(context, self._layout.position))
 
     # ----------------------------------------------------------------------------------- update
     def _noise(self, n: int) -> np.ndarray:
