@@ -144,16 +144,8 @@ def add_contact_tracking(
         robot.plant, robot.frame, joints=robot.joints, positions=robot.positions)))
     builder.Connect(joint_state, pose.GetInputPort("state"))
     bubbles = _add_tactile(builder, h, tactile)
-    isolator = builder.AddNamedSystem("contact_isolator", ContactIsolator(
-        h, seed=cpf_seed, n_bubbles=0 if bubbles is None else len(tactile.bodies),
-        **(isolator_kwargs or {})))  # fmt: skip
-    builder.Connect(estimator.GetOutputPort("ee_wrench"), isolator.GetInputPort("ee_wrench"))
-    builder.Connect(pose.GetOutputPort("gripper_pose"), isolator.GetInputPort("gripper_pose"))
-    builder.Connect(detector.GetOutputPort("in_contact"), isolator.GetInputPort("in_contact"))
-    if bubbles is not None:
-        for name in ("bubble_in_contact", "bubble_contact_points"):
-            builder.Connect(bubbles.GetOutputPort(name), isolator.GetInputPort(name))
-
+    isolator = _add_isolator(builder, h, cpf_seed, isolator_kwargs, estimator, pose, detector,
+                             bubbles)  # fmt: skip
     assembler = builder.AddNamedSystem("action_contacts", ActionContactsAssembler(h, truth=truth))
     if truth is not None:
         builder.Connect(truth_state, assembler.GetInputPort("truth_state"))
@@ -162,7 +154,31 @@ def add_contact_tracking(
     for name in ("has_contact", "contact_points"):
         builder.Connect(isolator.GetOutputPort(name), assembler.GetInputPort(name))
     builder.Connect(pose.GetOutputPort("gripper_pose"), assembler.GetInputPort("gripper_pose"))
+    tracking, target = _add_tracking(builder, h, assembler, tracker, tracker_seed, penetration,
+                                     target_shape, icp_seed, dx_model)  # fmt: skip
+    chain = ContactTracking(estimator, detector, pose, bubbles, isolator, assembler, tracking,
+                            target, {})  # fmt: skip
+    chain.outputs = {name: getattr(chain, system).GetOutputPort(name) for system, name in OUTPUTS}
+    if truth is not None:
+        chain.outputs["action_truth"] = assembler.GetOutputPort("action_truth")
+    return chain
 
+
+def _add_isolator(builder, h, cpf_seed, isolator_kwargs, estimator, pose, detector, bubbles):
+    n_bubbles = 0 if bubbles is None else bubbles.num_bubbles
+    isolator = builder.AddNamedSystem("contact_isolator", ContactIsolator(
+        h, seed=cpf_seed, n_bubbles=n_bubbles, **(isolator_kwargs or {})))  # fmt: skip
+    builder.Connect(estimator.GetOutputPort("ee_wrench"), isolator.GetInputPort("ee_wrench"))
+    builder.Connect(pose.GetOutputPort("gripper_pose"), isolator.GetInputPort("gripper_pose"))
+    builder.Connect(detector.GetOutputPort("in_contact"), isolator.GetInputPort("in_contact"))
+    if bubbles is not None:
+        for name in ("bubble_in_contact", "bubble_contact_points"):
+            builder.Connect(bubbles.GetOutputPort(name), isolator.GetInputPort(name))
+    return isolator
+
+
+def _add_tracking(builder, h, assembler, tracker, tracker_seed, penetration, target_shape,
+                  icp_seed, dx_model):  # fmt: skip
     tracking = builder.AddNamedSystem("soft_tracking", SoftTrackingFilter(
         tracker, tracker_seed, h, dx_model=dx_model, robot_sdf=penetration.robot_sdf))
     for name in ("ee_pose", "action_contacts"):
@@ -172,13 +188,7 @@ def add_contact_tracking(
     builder.Connect(assembler.GetOutputPort("ee_pose"), target.GetInputPort("ee_pose"))
     for name in ("map_points", "segment_labels", "tracked_action", "point_spread"):
         builder.Connect(tracking.GetOutputPort(name), target.GetInputPort(name))
-
-    chain = ContactTracking(estimator, detector, pose, bubbles, isolator, assembler, tracking,
-                            target, {})  # fmt: skip
-    chain.outputs = {name: getattr(chain, system).GetOutputPort(name) for system, name in OUTPUTS}
-    if truth is not None:
-        chain.outputs["action_truth"] = assembler.GetOutputPort("action_truth")
-    return chain
+    return tracking, target
 
 
 def _observed_joints(builder, robot: ObservedRobot, robot_state, applied_torque):

@@ -91,6 +91,7 @@ class BubbleContactSensor(LeafSystem):
             names = [body.name() for body in bodies]
             raise ValueError(f"BubbleContactSensor: no ellipsoid geometry on bodies {names}")
         self.bubble_names = [b[4] for b in bubbles]
+        self.num_bubbles = len(bubbles)
         self._bubbles = bubbles
         self._index = {b[0]: i for i, b in enumerate(bubbles)}
         self._threshold = float(deformation_threshold)
