@@ -11,26 +11,37 @@ from __future__ import annotations
 
 import numpy as np
 
+#: float64 carries 29 more fraction bits than float32: a float32 midpoint has these low bits.
+_EXTRA_BITS = 29
+_MIDPOINT = 1 << (_EXTRA_BITS - 1)
+#: Below this magnitude float32 is subnormal and its spacing is not a fixed 29-bit step.
+_FLOAT32_TINY = float(np.finfo(np.float32).tiny)
+
 
 def fused_multiply_add_float32(a, b, c) -> np.ndarray:
     """a * b + c for float32 arrays, rounded once to float32 (as a hardware fma).
 
-    The product of two float32 values is exact in float64; the sum is formed in float64 with its
-    rounding error (two-sum), and rounded to odd (the last bit set whenever the sum is inexact).
-    A float64 value rounded to odd rounds to float32 exactly as the exact sum would, since float64
-    carries more than 2 * 24 + 1 bits.
+    The product of two float32 values is exact in float64, so the float64 sum is rounded once.
+    Rounding that sum to float32 again gives the correctly rounded result unless the sum fell
+    exactly on a float32 midpoint (rounding to nearest cannot cross one, every midpoint being a
+    float64 value): there the exact sum's side is read from the two-sum error term.
     """
     product = np.asarray(a, dtype=np.float64) * np.asarray(b, dtype=np.float64)
     addend = np.asarray(c, dtype=np.float64)
     total = product + addend
-    # Two-sum: the exact rounding error of the float64 addition.
-    back = total - product
-    error = (product - (total - back)) + (addend - back)
-    even = (total.view(np.int64) & 1) == 0
-    inexact_even = (error != 0.0) & even
-    if inexact_even.any():
+    low = total.view(np.int64) & ((1 << _EXTRA_BITS) - 1)
+    doubtful = (low == _MIDPOINT) | (np.abs(total) < _FLOAT32_TINY)
+    if doubtful.any():
+        at = np.flatnonzero(doubtful)
+        p, q, t = (np.broadcast_to(v, total.shape).ravel()[at] for v in (product, addend, total))
+        back = t - p
+        error = (p - (t - back)) + (q - back)  # two-sum: t + error == p + q exactly
+        # Round to odd: an inexact sum with its last bit clear moves one float64 step toward the
+        # exact sum; float32 rounding of a float64 rounded to odd is the correct rounding.
+        even = (t.view(np.int64) & 1) == 0
         toward = np.where(error > 0.0, np.inf, -np.inf)
-        total = np.where(inexact_even, np.nextafter(total, toward), total)
+        t = np.where((error != 0.0) & even, np.nextafter(t, toward), t)
+        total.ravel()[at] = t  # total is a fresh contiguous array
     return total.astype(np.float32)
 
 

@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 
+from stucco_drake.core.deep_region import deep_region
 from stucco_drake.core.sdf import GridSdf
-from stucco_drake.core.state_pairs import deep_ball, ordered_sums, penetrating_entries
+from stucco_drake.core.state_pairs import ordered_sums, penetrating_entries
 
 #: Integer grid coordinates use int16 while every coordinate stays within this many cells.
 _INT16_LIMIT = 16000
@@ -44,7 +45,7 @@ class RobotPenetration:
         self.deduplicate = bool(deduplicate)
         self._workspace: dict[str, np.ndarray] = {}
         self._crops: dict[float, tuple] = {}
-        self._deep_balls: dict[float, tuple | None] = {}
+        self._deep_regions: dict[float, tuple | None] = {}
 
     def __call__(self, config_positions, points, config_rotation=None) -> np.ndarray:
         """Depth (m, >= 0) of ``points[..., 3]`` inside the robot at ``config_positions[..., 3]``.
@@ -72,10 +73,10 @@ class RobotPenetration:
             max(0, depth - tolerance), added in the order of one pass per orientation slot.
         """
         key = float(tolerance)
-        if key not in self._deep_balls:
-            self._deep_balls[key] = deep_ball(self.robot_sdf, key)
+        if key not in self._deep_regions:
+            self._deep_regions[key] = deep_region(self.robot_sdf, key)
         entries = penetrating_entries(
-            self.robot_sdf, tolerance, self._deep_balls[key], points, configs, rotation_index,
+            self.robot_sdf, tolerance, self._deep_regions[key], points, configs, rotation_index,
             rotations, self.pair_budget,
         )  # fmt: skip
         if entries is None:

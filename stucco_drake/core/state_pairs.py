@@ -1,33 +1,32 @@
 """Every particle's configs against every point of it, evaluated once per distinct value pair.
 
 After resampling most particles hold identical copies of a contact, and a prediction step
-moves a copy or not, so across 100 particles a contact takes only a few distinct (point) and
-(config, orientation) values: its *states*. The penetration of a (config, point) pair depends
-only on the two states, so it is evaluated once per state pair and credited to every particle
-holding both. State pairs are culled on world distance first (a ball around the robot's deep
-region), so only pairs near the robot are rotated into the config's frame and interpolated.
+moves a copy or not, so across 100 particles a contact (its point, config and orientation) takes
+only a few distinct values: its *states*. The penetration of a (config, point) pair depends only
+on the two states, so it is evaluated once per state pair that some particle holds and credited
+to every particle holding both. Pairs are screened before any exact work: column pairs by the
+boxes of their states, state pairs by a ball around the robot's deep region, then by the grid
+cell's smallest corner value (:mod:`stucco_drake.core.deep_region`); a config in a rotated
+orientation is first screened with a plain float32 rotation, and only the pairs left are rotated
+with the fixed rounding of :mod:`stucco_drake.core.float32_frames` and interpolated.
 
 The sums are formed exactly as a per-particle, per-orientation pass over all pairs forms them
 (the tracker's float64 sums of float32 excesses are compared against 0 and against each other,
 so the order of additions is part of the result): for each particle, the orientations in slot
 order, and within one the pairs in (config, point) order, each orientation's subtotal added to
-the running total.
-"""
+the running total."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from stucco_drake.core.deep_region import could_penetrate
 from stucco_drake.core.float32_frames import in_frame_float32
-from stucco_drake.core.sdf import GridSdf
 
 #: Above this many held state pairs per (particle, column pair), states are shared too little.
 _MAX_STATE_PAIR_SHARE = 0.25
-#: Nodes this close above -tolerance (m) still count as deep: float32 interpolation rounding.
-_DEPTH_SLACK = 1e-6
 
 
 @dataclass(frozen=True)
@@ -91,16 +90,18 @@ def column_states(keys: list[np.ndarray]) -> ColumnStates:
     n_particles, n = keys[0].shape
     by_column = [np.ascontiguousarray(k.T) for k in keys]  # (n, n_particles)
     order = _sorted_by_value(by_column)
+    flat_order = order + (np.arange(n) * n_particles)[:, None]  # into the raveled columns
     new_state = np.zeros((n, n_particles), dtype=bool)
     new_state[:, 0] = True
     for k in by_column:
-        ranked = np.take_along_axis(k, order, axis=1)
+        ranked = k.ravel()[flat_order]
         new_state[:, 1:] |= ranked[:, 1:] != ranked[:, :-1]
     counts = new_state.sum(axis=1)
     offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    rank = np.cumsum(new_state, axis=1) - 1 + offsets[:, None]
+    # Columns are consecutive rows here, so one running count numbers every state globally.
+    rank = (np.cumsum(new_state.ravel(), dtype=np.int64) - 1).reshape(n, n_particles)
     ids = np.empty((n, n_particles), dtype=np.int64)
-    np.put_along_axis(ids, order, rank, axis=1)
+    ids.ravel()[flat_order] = rank
     holders = order[new_state]  # row-major: column by column, states in rank order
     columns = np.repeat(np.arange(n), counts)
     member_start = np.flatnonzero(new_state)
@@ -115,23 +116,7 @@ def float_bits(array: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(array, dtype=np.float32).view(np.uint32)
 
 
-def deep_ball(grid: GridSdf, tolerance: float):
-    """(center (3,), radius) in frame E (m): a pair (config, point) can penetrate deeper than
-    ``tolerance`` only if the point lies in this ball around the config; None if nothing can.
-
-    The interpolant is below -tolerance only if a corner of the point's cell is, and every
-    corner is within sqrt(3) cells of the point; one more cell covers float32 rounding.
-    """
-    deep = np.argwhere(grid.values < -tolerance + _DEPTH_SLACK)
-    if len(deep) == 0:
-        return None
-    nodes = grid.lower + deep * grid.resolution
-    center = 0.5 * (nodes.min(axis=0) + nodes.max(axis=0))
-    reach = float(np.sqrt(((nodes - center) ** 2).sum(axis=1)).max())
-    return center, reach + (math.sqrt(3.0) + 1.0) * grid.resolution
-
-
-def candidate_columns(point_world, point_states, center_world, config_states, radius):
+def candidate_columns(point_world, center_world, states, radius):
     """(config column, point column) pairs whose state boxes come within ``radius`` (m).
 
     Per column, the box of its point states and the box of its configs' ball centers (world);
@@ -142,8 +127,8 @@ def candidate_columns(point_world, point_states, center_world, config_states, ra
         return (np.minimum.reduceat(values, starts, axis=1),
                 np.maximum.reduceat(values, starts, axis=1))  # fmt: skip
 
-    point_lo, point_hi = column_box(point_world.astype(np.float64), point_states)
-    center_lo, center_hi = column_box(center_world, config_states)
+    point_lo, point_hi = column_box(point_world.astype(np.float64), states)
+    center_lo, center_hi = column_box(center_world, states)
     gap2 = np.zeros((center_lo.shape[1], point_lo.shape[1]))
     for axis in range(3):
         gap = np.maximum(point_lo[axis][None, :] - center_hi[axis][:, None],
@@ -152,27 +137,29 @@ def candidate_columns(point_world, point_states, center_world, config_states, ra
     return np.nonzero(gap2 <= radius * radius)
 
 
-def held_state_pairs(config_column, point_column, config_states, point_states):
+def held_state_pairs(config_column, point_column, states):
     """The (config state, point state) pairs some particle holds in the given column pairs, as
     global state numbers, each once: of a pair's count_c x count_p combinations, usually only a
     few are held together (the particles' entries in two columns are not independent)."""
-    per_config = point_states.counts[point_column]
-    combos = config_states.counts[config_column] * per_config
+    per_config = states.counts[point_column]
+    combos = states.counts[config_column] * per_config
     start = np.cumsum(combos) - combos
     held = np.zeros(int(combos.sum()), dtype=bool)
+    if held.size < 2**31:  # half the memory traffic in the n_particles x pairs step
+        per_config, start = per_config.astype(np.int32), start.astype(np.int32)
     # Where a column has one state, every state of the other is held with it; elsewhere each
     # particle marks the combination it holds (n_particles x pairs).
-    single = (config_states.counts[config_column] == 1) | (per_config == 1)
+    single = (states.counts[config_column] == 1) | (per_config == 1)
     held[_ranges(start[single], combos[single])] = True
     mixed = np.flatnonzero(~single)
-    combination = (start[mixed] + per_config[mixed] * config_states.local[:, config_column[mixed]]
-                   + point_states.local[:, point_column[mixed]])  # fmt: skip
+    combination = (start[mixed] + per_config[mixed] * states.local[:, config_column[mixed]]
+                   + states.local[:, point_column[mixed]])  # fmt: skip
     held[combination.ravel()] = True
     index = np.flatnonzero(held)
     pair = np.searchsorted(start, index, side="right") - 1
     config_local, point_local = np.divmod(index - start[pair], per_config[pair])
-    return (config_states.offsets[config_column[pair]] + config_local,
-            point_states.offsets[point_column[pair]] + point_local)  # fmt: skip
+    return (states.offsets[config_column[pair]] + config_local,
+            states.offsets[point_column[pair]] + point_local)  # fmt: skip
 
 
 def _ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -190,7 +177,7 @@ def _state_table(points, configs, rotation_index):
     point_world = points[:, states.holders, states.columns]
     config_world = configs[:, states.holders, states.columns]
     slot = rotation_index[states.holders, states.columns].astype(np.int64)
-    return states, states, point_world, config_world, slot
+    return states, point_world, config_world, slot
 
 
 def _in_slot_frames(vectors, slot, frames_t, identity):
@@ -212,42 +199,62 @@ def _distinct(keys: np.ndarray, n_keys: int):
     return distinct, position[keys]
 
 
-def _penetrating_state_pairs(grid, tolerance, config_state, point_state, table, frames):
-    """The state pairs (and their float32 excess) that penetrate deeper than ``tolerance``."""
-    _, _, point_world, config_world, slot = table
+def _penetrating_state_pairs(grid, tolerance, region, config_state, point_state, offset, table,
+                             frames):  # fmt: skip
+    """The state pairs (and their float32 excess) that penetrate deeper than ``tolerance``.
+
+    ``offset`` (3, k) float32 is each pair's point minus config (world): for a config in an
+    exactly-identity orientation that is the difference the per-orientation pass forms.
+    """
+    slot = table[3]
     frames_t, identity = frames
-    pair_slot = slot[config_state]
-    if identity[pair_slot].all():  # nothing to rotate
-        points_e, point_of_pair = point_world, point_state
-        configs_e, config_of_pair = config_world, config_state
-    else:  # each (point state, slot) and each config state that a pair needs, rotated once
-        n_slots = len(frames_t)
-        point_key, point_of_pair = _distinct(point_state * n_slots + pair_slot,
-                                             point_world.shape[1] * n_slots)  # fmt: skip
-        points_e = _in_slot_frames(point_world[:, point_key // n_slots], point_key % n_slots,
-                                   frames_t, identity)  # fmt: skip
-        config_key, config_of_pair = _distinct(config_state, config_world.shape[1])
-        configs_e = _in_slot_frames(config_world[:, config_key], slot[config_key], frames_t,
-                                    identity)  # fmt: skip
     inverse_h = np.float32(1.0 / grid.resolution)
     origin_cells = (grid.lower / grid.resolution).astype(np.float32)
-    cells = [
-        (points_e[a, point_of_pair] - configs_e[a, config_of_pair]) * inverse_h
-        - origin_cells[a]
-        for a in range(3)
-    ]
-    excess = np.maximum(-grid.at_cell_coordinates(*cells) - tolerance, 0.0)
-    hit = np.flatnonzero(excess > 0.0)
-    return config_state[hit], point_state[hit], excess[hit]
+    pair_slot = slot[config_state]
+    which = np.flatnonzero(identity[pair_slot])
+    cells = [offset[a, which] * inverse_h - origin_cells[a] for a in range(3)]
+    rotated = np.flatnonzero(~identity[pair_slot])
+    if rotated.size:
+        # A plain float32 rotation (off by ~1e-7 m, far less than a cell) screens the pairs
+        # first; only those left are rotated with the exact rounding.
+        rough = np.einsum("kij,jk->ik", frames_t[pair_slot[rotated]], offset[:, rotated])
+        rough_cells = [rough[a] * inverse_h - origin_cells[a] for a in range(3)]
+        rotated = rotated[could_penetrate(grid, region, rough_cells, within_a_cell=True)]
+        exact = _rotated_differences(config_state[rotated], point_state[rotated], table, frames)
+        which = np.concatenate([which, rotated])
+        cells = [np.concatenate([c, e * inverse_h - o])
+                 for c, e, o in zip(cells, exact, origin_cells, strict=True)]  # fmt: skip
+    keep = np.flatnonzero(could_penetrate(grid, region, cells))
+    excess = np.maximum(-grid.at_cell_coordinates(*(c[keep] for c in cells)) - tolerance, 0.0)
+    hit = which[keep[excess > 0.0]]
+    return config_state[hit], point_state[hit], excess[excess > 0.0]
 
 
-def penetrating_entries(grid, tolerance, ball, points, configs, rotation_index, rotations, budget):
+def _rotated_differences(config_state, point_state, table, frames):
+    """Point minus config along the config's slot axes, (3, k) float32, as the per-orientation
+    pass forms it: both rotated (each (point state, slot) and config state once), then
+    subtracted."""
+    _, point_world, config_world, slot = table
+    frames_t, identity = frames
+    n_slots = len(frames_t)
+    pair_slot = slot[config_state]
+    point_key, point_of_pair = _distinct(point_state * n_slots + pair_slot,
+                                         point_world.shape[1] * n_slots)  # fmt: skip
+    points_e = _in_slot_frames(point_world[:, point_key // n_slots], point_key % n_slots,
+                               frames_t, identity)  # fmt: skip
+    config_key, config_of_pair = _distinct(config_state, config_world.shape[1])
+    configs_e = _in_slot_frames(config_world[:, config_key], slot[config_key], frames_t, identity)
+    return points_e[:, point_of_pair] - configs_e[:, config_of_pair]
+
+
+def penetrating_entries(grid, tolerance, region, points, configs, rotation_index, rotations,
+                        budget):  # fmt: skip
     """Every (particle, slot, config, point, excess) whose pair penetrates beyond ``tolerance``.
 
     Args:
         grid: the robot's signed distance in frame E (m).
         tolerance: penetration (m) ignored per pair.
-        ball: :func:`deep_ball` of the grid at this tolerance.
+        region: :func:`deep_region` of the grid at this tolerance.
         points, configs: (3, n_particles, n) float32 world positions (m).
         rotation_index: (n_particles, n) orientation slot of each config.
         rotations: (n_slots, 3, 3) R_WE of each slot.
@@ -256,48 +263,56 @@ def penetrating_entries(grid, tolerance, ball, points, configs, rotation_index, 
     Returns None when the particles share too few states for this to pay off.
     """
     empty = np.zeros(0, dtype=np.int64)
-    if ball is None:
+    if region is None:
         return empty, empty, empty, empty, np.zeros(0, dtype=np.float32)
-    center, radius = ball
+    center, radius = region.center, region.radius
     n_particles = points.shape[1]
     table = _state_table(points, configs, rotation_index)
-    point_states, config_states, point_world, config_world, slot = table
+    states, point_world, config_world, slot = table
     rotations = np.asarray(rotations, dtype=np.float64)
     frames = (np.transpose(rotations, (0, 2, 1)).astype(np.float32),
               (rotations == np.eye(3)).all(axis=(1, 2)))  # fmt: skip
     # The ball's center for each config state, in world coordinates.
     center_world = config_world.astype(np.float64) + (rotations @ center)[slot].T
-    config_column, point_column = candidate_columns(point_world, point_states, center_world,
-                                                    config_states, radius)  # fmt: skip
+    config_column, point_column = candidate_columns(point_world, center_world, states, radius)
     # Column pairs in blocks of about ``budget`` (particle, column pair) entries.
     block = max(1, int(budget) // n_particles)
-    held = [held_state_pairs(config_column[k : k + block], point_column[k : k + block],
-                             config_states, point_states)
-            for k in range(0, config_column.size, block)]  # fmt: skip
+    held = [held_state_pairs(config_column[k : k + block], point_column[k : k + block], states)
+            for k in range(0, config_column.size, block)]
     if sum(c.size for c, _ in held) > _MAX_STATE_PAIR_SHARE * n_particles * config_column.size:
         return None  # particles too diverse: a pass over each particle's pairs is cheaper
     hits = []
+    # The ball's center relative to each config state (world); float32 rounding (~1e-7 m) is
+    # far inside the ball's one-cell slack.
+    center_shift = (rotations @ center)[slot].T.astype(np.float32)
+    radius2 = np.float32(radius * radius)
     for config_state, point_state in held:
-        offset = point_world[:, point_state].astype(np.float64) - center_world[:, config_state]
-        near = np.einsum("ik,ik->k", offset, offset) <= radius * radius
-        hits.append(_penetrating_state_pairs(grid, tolerance, config_state[near],
-                                             point_state[near], table, frames))  # fmt: skip
+        offset = point_world[:, point_state] - config_world[:, config_state]
+        distance2 = np.zeros(config_state.size, dtype=np.float32)
+        for axis in range(3):
+            distance2 += (offset[axis] - center_shift[axis, config_state]) ** 2
+        near = np.flatnonzero(distance2 <= radius2)
+        hits.append(_penetrating_state_pairs(grid, tolerance, region, config_state[near],
+                                             point_state[near], offset[:, near], table,
+                                             frames))  # fmt: skip
     if not hits:
         return empty, empty, empty, empty, np.zeros(0, dtype=np.float32)
     config_state, point_state, excess = (np.concatenate(v) for v in zip(*hits, strict=True))
-    particle, which = _holders_of_both(config_state, point_state, config_states, point_states)
-    return (particle, slot[config_state[which]], config_states.columns[config_state[which]],
-            point_states.columns[point_state[which]], excess[which])  # fmt: skip
+    particle, which = _holders_of_both(config_state, point_state, states)
+    return (particle, slot[config_state[which]], states.columns[config_state[which]],
+            states.columns[point_state[which]], excess[which])  # fmt: skip
 
 
-def _holders_of_both(config_state, point_state, config_states, point_states):
+def _holders_of_both(config_state, point_state, states):
     """(particle, pair) for every particle holding both states of a pair: the members of the
-    config state whose entry in the point's column is in the point state."""
-    count = config_states.member_count[config_state]
-    pair = np.repeat(np.arange(config_state.size), count)
-    particle = config_states.members[_ranges(config_states.member_start[config_state], count)]
-    point_column = point_states.columns[point_state]
-    holds = point_states.ids[particle, point_column[pair]] == point_state[pair]
+    state with fewer members whose entry in the other's column is in the other state."""
+    by_config = states.member_count[config_state] <= states.member_count[point_state]
+    listed = np.where(by_config, config_state, point_state)
+    other = np.where(by_config, point_state, config_state)
+    count = states.member_count[listed]
+    pair = np.repeat(np.arange(listed.size), count)
+    particle = states.members[_ranges(states.member_start[listed], count)]
+    holds = states.ids[particle, states.columns[other][pair]] == other[pair]
     return particle[holds], pair[holds]
 
 
