@@ -25,7 +25,9 @@ import numpy as np
 from stucco_drake.core.deep_region import could_penetrate
 from stucco_drake.core.float32_frames import in_frame_float32
 
-#: Above this many held state pairs per (particle, column pair), states are shared too little.
+#: Above this many states per column and particle, or held state pairs per (particle, column
+#: pair), particles share too little for the state pairs to beat a pass over each particle.
+_MAX_STATES_PER_PARTICLE = 0.125
 _MAX_STATE_PAIR_SHARE = 0.25
 
 
@@ -269,6 +271,8 @@ def penetrating_entries(grid, tolerance, region, points, configs, rotation_index
     n_particles = points.shape[1]
     table = _state_table(points, configs, rotation_index)
     states, point_world, config_world, slot = table
+    if states.counts.mean() > _MAX_STATES_PER_PARTICLE * n_particles:
+        return None  # particles too diverse: a pass over each particle's pairs is cheaper
     rotations = np.asarray(rotations, dtype=np.float64)
     frames = (np.transpose(rotations, (0, 2, 1)).astype(np.float32),
               (rotations == np.eye(3)).all(axis=(1, 2)))  # fmt: skip
