@@ -2,10 +2,13 @@
 
 Complexity of one update with N particles and n accumulated contacts:
   - in contact: connection sampling O(N n m) for m new contacts; the penetration check of every
-    config against every point is O(N n^2) cheap comparisons (cull by the robot's box), plus
-    trilinear lookups for the surviving pairs only, O(N n^2 f) with f the fraction of pairs
-    whose relative position falls in that box (a few percent to ~20 % in clutter); ReplaceBad is
-    O(B n) for B bad points. Memory is bounded by the pair budget (2^20 pairs per block).
+    config against every point groups each contact's values across particles (O(N n log N)),
+    boxes those groups (O(n^2) comparisons), finds the state pairs particles hold in the
+    P column pairs whose boxes come near the robot (O(N P) integer work), and screens and
+    interpolates each held state pair once rather than once per particle; ReplaceBad is
+    O(B n) for B bad points. Particles that share few states (a diverse belief) take the
+    per-particle pass instead: O(N n^2) cheap comparisons, lookups for pairs near the robot.
+    Memory is bounded by the pair budget (2^20 pairs per block).
   - out of contact: O(N n) (the current config against every point).
 
 The contacts come from the built-in planar world: a 10 cm disc EE rummaging through 8 boxes

@@ -8,7 +8,9 @@ in closed form in torch (its cheapest possible pxpen, so the ratio is conservati
 ``--reference-pxpen grid`` the same grid interpolated in torch. Each runs on
 one thread (torch.set_num_threads(1); numpy's BLAS limited before numpy loads). For each contact
 count both are brought to that many contacts, then one in-contact update of a copy of each is
-timed, alternating which goes first, ``--repeats`` times. Streams: one EE orientation, and one
+timed, alternating which goes first, ``--repeats`` times (``--large-repeats`` from
+``--large`` contacts on: the reference takes about a second per update there, and growing it
+from 200 to 400 contacts takes minutes). Streams: one EE orientation, and one
 orientation per contact (yaw within +-3 deg, as in closed-loop runs; the disc is symmetric
 about z, so the contacts stay consistent). Prints medians and p90s (ms) and the ratio of
 medians (reference / ours).
@@ -17,7 +19,7 @@ Needs the optional extra: pip install -e '.[reference]' (in a separate virtualen
 project's stays as CI has it). Without it this prints how to install it and exits 0.
 
 Run: taskset -c 1 python benchmarks/bench_vs_reference.py [--contacts 50 100 200 400]
-     [--repeats 15]
+     [--repeats 15] [--large 400 --large-repeats 7]
 """
 
 from __future__ import annotations
@@ -133,7 +135,8 @@ def reference_update(tracker, position, yaw, point, dx):
 
 def run_stream(grid, args, orientations: bool, pxpen: str):
     rng = np.random.default_rng(0)
-    positions, points, dx = contact_stream(rng, max(args.contacts) + args.repeats)
+    positions, points, dx = contact_stream(rng, max(args.contacts) + max(args.repeats,
+                                                                         args.large_repeats))
     yaws = rng.uniform(-0.05, 0.05, len(points)) if orientations else np.zeros(len(points))
     ours = SoftTracker(RobotPenetration(grid), SoftTrackingParams.sim())
     reference = make_reference(grid, pxpen)
@@ -148,7 +151,8 @@ def run_stream(grid, args, orientations: bool, pxpen: str):
             reference_update(reference, positions[t], yaws[t], points[t], dx[t])
         done = contacts
         timings = {"ours": [], "reference": []}
-        for r in range(args.repeats):
+        repeats = args.large_repeats if contacts >= args.large else args.repeats
+        for r in range(repeats):
             t = contacts + r
             order = ("ours", "reference") if r % 2 == 0 else ("reference", "ours")
             for name in order:
@@ -164,7 +168,7 @@ def run_stream(grid, args, orientations: bool, pxpen: str):
                 timings[name].append(time.perf_counter() - start)
         o, f = (np.array(timings[k]) * 1e3 for k in ("ours", "reference"))
         stream = "one per contact" if orientations else "one"
-        print(f"| {stream} | {pxpen} | {contacts} | {np.median(o):.2f} | "
+        print(f"| {stream} | {pxpen} | {contacts} ({repeats}) | {np.median(o):.2f} | "
               f"{np.percentile(o, 90):.2f} | {np.median(f):.2f} | {np.percentile(f, 90):.2f} | "
               f"{np.median(f) / np.median(o):.1f} |", flush=True)  # fmt: skip
 
@@ -173,6 +177,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--contacts", type=int, nargs="+", default=[50, 100, 200, 400])
     parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument("--large", type=int, default=400,
+                        help="from this many contacts on, time --large-repeats updates")
+    parser.add_argument("--large-repeats", type=int, default=7)
     parser.add_argument("--stream", choices=("one", "per-contact", "both"), default="both")
     parser.add_argument("--reference-pxpen", choices=("disc", "grid", "both"), default="disc",
                         help="the reference's pxpen: the disc's closed form (default, its "
@@ -185,8 +192,9 @@ def main():
     torch.set_num_threads(1)
     grid = robot_grid()
     print(f"# in-contact update, 100 particles, Table I sim; numpy {np.__version__}, "
-          f"torch {torch.__version__}, one thread each")  # fmt: skip
-    print("| EE orientations | reference pxpen | contacts | ours median (ms) | ours p90 "
+          f"torch {torch.__version__}, one thread each; load average at start "
+          f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}")  # fmt: skip
+    print("| EE orientations | reference pxpen | contacts (repeats) | ours median (ms) | ours p90 "
           "| reference median (ms) | reference p90 | reference / ours |")
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     streams = {"one": (False,), "per-contact": (True,), "both": (False, True)}[args.stream]

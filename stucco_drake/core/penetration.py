@@ -6,12 +6,21 @@ import math
 
 import numpy as np
 
+from stucco_drake.core.deep_region import deep_region
 from stucco_drake.core.sdf import GridSdf
+from stucco_drake.core.state_pairs import ordered_sums, penetrating_entries
 
 #: Integer grid coordinates use int16 while every coordinate stays within this many cells.
 _INT16_LIMIT = 16000
 #: Stand-in coordinate of a skipped config: every difference with it falls outside the grid.
 _SKIP = 16383
+
+
+def _in_frame(rotation: np.ndarray, array: np.ndarray) -> np.ndarray:
+    """Coordinates of world vectors ``array[3, ...]`` (float32) along the axes of ``rotation``."""
+    if np.array_equal(rotation, np.eye(3)):
+        return array
+    return np.tensordot(rotation.T.astype(np.float32), array, axes=1)
 
 
 class RobotPenetration:
@@ -36,6 +45,7 @@ class RobotPenetration:
         self.deduplicate = bool(deduplicate)
         self._workspace: dict[str, np.ndarray] = {}
         self._crops: dict[float, tuple] = {}
+        self._deep_regions: dict[float, tuple | None] = {}
 
     def __call__(self, config_positions, points, config_rotation=None) -> np.ndarray:
         """Depth (m, >= 0) of ``points[..., 3]`` inside the robot at ``config_positions[..., 3]``.
@@ -47,6 +57,56 @@ class RobotPenetration:
         if config_rotation is not None:
             relative = relative @ np.asarray(config_rotation, dtype=np.float64)
         return np.maximum(-self.robot_sdf(relative), 0.0)
+
+    def all_pairs_excess_sums(self, points, configs, rotation_index, rotations, tolerance: float):
+        """:meth:`excess_sums` of every config against every point of the same particle, each
+        config in its own orientation, over the distinct (config, point) states only.
+
+        Args:
+            points, configs: (3, n_particles, n) float32 world positions (m).
+            rotation_index: (n_particles, n) orientation slot of each config.
+            rotations: (n_slots, 3, 3) R_WE of each slot.
+            tolerance: penetration (m) ignored per pair.
+
+        Returns:
+            per_particle (n_particles,) and per_point (n_particles, n) float64 sums of
+            max(0, depth - tolerance), added in the order of one pass per orientation slot.
+        """
+        key = float(tolerance)
+        if key not in self._deep_regions:
+            self._deep_regions[key] = deep_region(self.robot_sdf, key)
+        entries = penetrating_entries(
+            self.robot_sdf, tolerance, self._deep_regions[key], points, configs, rotation_index,
+            rotations, self.pair_budget,
+        )  # fmt: skip
+        if entries is None:
+            return self._per_orientation_sums(points, configs, rotation_index, rotations,
+                                              tolerance)  # fmt: skip
+        return ordered_sums(entries, points.shape[1], points.shape[2])
+
+    def _per_orientation_sums(self, points, configs, rotation_index, rotations, tolerance):
+        """:meth:`all_pairs_excess_sums` by one :meth:`excess_sums` pass per orientation slot
+        (each particle's pairs checked separately): for particles that share few states."""
+        if len(rotations) == 1:
+            return self.excess_sums(_in_frame(rotations[0], points),
+                                    _in_frame(rotations[0], configs), tolerance)  # fmt: skip
+        per_particle = np.zeros(points.shape[1])
+        per_point = np.zeros(points.shape[1:])
+        for index, rotation in enumerate(rotations):
+            in_group = rotation_index == index
+            # Only the columns some particle holds in this orientation: a closed-loop run has
+            # about one orientation per action, so each pass checks a few configs, not all n.
+            columns = np.flatnonzero(in_group.any(axis=0))
+            if columns.size == 0:
+                continue
+            group_configs = np.where(
+                in_group[:, columns], _in_frame(rotation, configs[:, :, columns]), np.nan
+            )
+            a, b = self.excess_sums(_in_frame(rotation, points),
+                                    group_configs.astype(np.float32), tolerance)  # fmt: skip
+            per_particle += a
+            per_point += b
+        return per_particle, per_point
 
     # -------------------------------------------------------------------------------- hot path
     def _buffer(self, name: str, size: int, dtype) -> np.ndarray:

@@ -161,14 +161,20 @@ class SoftTracker:
         self.resampled = (
             effective_sample_size(self._log_weights) < self.params.resample_ess_fraction * n
         )
+        bad = per_point > 0.0
         if self.resampled:
             ancestors = systematic_resample(self._log_weights, rng)
             copies = np.flatnonzero(ancestors == self._map_index)
+            # Copies of a particle would get identical repairs: repair each survivor once,
+            # before copying it.
+            survives = np.zeros(n, dtype=bool)
+            survives[ancestors] = True
+            self._replace_bad(bad & survives[:, None])
             self._take(ancestors)
-            per_point = per_point[ancestors]
             self._log_weights = np.full(n, -np.log(n))
             self._map_index = int(copies[0]) if len(copies) else 0
-        self._replace_bad(per_point > 0.0)
+        else:
+            self._replace_bad(bad)
 
     # ---------------------------------------------------------------------------- the pieces
     def _heaviest(self) -> int:
@@ -189,9 +195,12 @@ class SoftTracker:
         self._rotation_index = np.pad(self._rotation_index, ((0, 0), (0, grow)))
 
     def _rotation_slot(self, rotation: np.ndarray) -> int:
-        for index, known in enumerate(self._rotations):
-            if np.allclose(known, rotation, atol=1e-9):
-                return index
+        # The first known orientation np.allclose(known, rotation, atol=1e-9) accepts.
+        close = (np.abs(self._rotations - rotation) <= 1e-9 + 1e-5 * np.abs(rotation)).all(
+            axis=(1, 2)
+        )
+        if close.any():
+            return int(np.argmax(close))
         self._rotations = np.concatenate([self._rotations, rotation[None]])
         return len(self._rotations) - 1
 
@@ -249,34 +258,16 @@ class SoftTracker:
         return np.tensordot(rotation.T.astype(np.float32), array, axes=1)
 
     def _penetration_all_pairs(self):
-        """Every config of each particle against every point of it (Alg. 1, in contact)."""
+        """Every config of each particle against every point of it (Alg. 1, in contact), each
+        config in its own orientation."""
         n = self._n
-        points, configs = self._points[:, :, :n], self._configs[:, :, :n]
-        tolerance = self.params.intersection_tolerance
-        if len(self._rotations) == 1:
-            return self.penetration.excess_sums(
-                self._in_frame(self._rotations[0], points),
-                self._in_frame(self._rotations[0], configs),
-                tolerance,
-            )
-        per_particle = np.zeros(points.shape[1])
-        per_point = np.zeros(points.shape[1:])
-        for index, rotation in enumerate(self._rotations):  # one pass per distinct orientation
-            in_group = self._rotation_index[:, :n] == index
-            # Only the columns some particle holds in this orientation: a closed-loop run has
-            # about one orientation per action, so each pass checks a few configs, not all n.
-            columns = np.flatnonzero(in_group.any(axis=0))
-            if columns.size == 0:
-                continue
-            group_configs = np.where(
-                in_group[:, columns], self._in_frame(rotation, configs[:, :, columns]), np.nan
-            )
-            a, b = self.penetration.excess_sums(
-                self._in_frame(rotation, points), group_configs.astype(np.float32), tolerance
-            )
-            per_particle += a
-            per_point += b
-        return per_particle, per_point
+        return self.penetration.all_pairs_excess_sums(
+            self._points[:, :, :n],
+            self._configs[:, :, :n],
+            self._rotation_index[:, :n],
+            self._rotations,
+            self.params.intersection_tolerance,
+        )
 
     def _penetration_against(self, position, rotation):
         """The current config against every point of each particle (Alg. 1, out of contact)."""

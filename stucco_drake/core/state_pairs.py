@@ -1,0 +1,351 @@
+"""Every particle's configs against every point of it, evaluated once per distinct value pair.
+
+After resampling most particles hold identical copies of a contact, and a prediction step
+moves a copy or not, so across 100 particles a contact (its point, config and orientation) takes
+only a few distinct values: its *states*. The penetration of a (config, point) pair depends only
+on the two states, so it is evaluated once per state pair that some particle holds and credited
+to every particle holding both. Pairs are screened before any exact work: column pairs by the
+boxes of their states, state pairs by a ball around the robot's deep region, then by the grid
+cell's smallest corner value (:mod:`stucco_drake.core.deep_region`); a config in a rotated
+orientation is first screened with a plain float32 rotation, and only the pairs left are rotated
+with the fixed rounding of :mod:`stucco_drake.core.float32_frames` and interpolated.
+
+The sums are formed exactly as a per-particle, per-orientation pass over all pairs forms them
+(the tracker's float64 sums of float32 excesses are compared against 0 and against each other,
+so the order of additions is part of the result): for each particle, the orientations in slot
+order, and within one the pairs in (config, point) order, each orientation's subtotal added to
+the running total."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from stucco_drake.core.deep_region import could_penetrate
+from stucco_drake.core.float32_frames import in_frame_float32
+
+#: Above this many states per column and particle, or held state pairs per (particle, column
+#: pair), particles share too little for the state pairs to beat a pass over each particle.
+_MAX_STATES_PER_PARTICLE = 0.125
+_MAX_STATE_PAIR_SHARE = 0.25
+
+
+@dataclass(frozen=True)
+class ColumnStates:
+    """Distinct values of each column of a (n_particles, n) table of entries.
+
+    Attributes:
+        ids: (n_particles, n) global state number of each entry; a column's states are
+            numbered consecutively from ``offsets[column]``.
+        local: (n_particles, n) int32 state number of each entry within its column.
+        offsets: (n,) first state number of each column.
+        counts: (n,) number of states of each column.
+        holders: (n_states,) a particle holding each state.
+        columns: (n_states,) the column of each state.
+        members: (n * n_particles,) particles grouped by state: state s is held by
+            ``members[member_start[s] : member_start[s] + member_count[s]]``.
+        member_start, member_count: (n_states,) where each state's particles are in ``members``.
+    """
+
+    ids: np.ndarray
+    local: np.ndarray
+    offsets: np.ndarray
+    counts: np.ndarray
+    holders: np.ndarray
+    columns: np.ndarray
+    members: np.ndarray
+    member_start: np.ndarray
+    member_count: np.ndarray
+
+
+#: Odd 64-bit multipliers that spread each key's bits over the hash.
+_MIXERS = (0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9, 0xD6E8FEB86659FD93,
+           0xFF51AFD7ED558CCD, 0xC4CEB9FE1A85EC53, 0x94D049BB133111EB, 0xBF58476D1CE4E5B9)
+
+
+def _sorted_by_value(by_column: list[np.ndarray]) -> np.ndarray:
+    """(n, n_particles) particle order of each column with equal entries adjacent.
+
+    Sorts a hash of the keys whose low bits carry the particle number: one sort of plain
+    integers instead of a sort on every key. Equal entries have equal hashes, so they end up
+    adjacent; a collision (two values, one hash) only interleaves their entries.
+    """
+    n_particles = by_column[0].shape[1]
+    index_bits = max(1, int(n_particles - 1).bit_length())
+    digest = np.zeros(by_column[0].shape, dtype=np.uint64)
+    for k, mixer in zip(by_column, _MIXERS, strict=False):
+        digest ^= k.astype(np.uint64) * np.uint64(mixer)
+    digest = (digest >> np.uint64(index_bits)) << np.uint64(index_bits)
+    digest |= np.arange(n_particles, dtype=np.uint64)[None, :]
+    return (np.sort(digest, axis=1) & np.uint64((1 << index_bits) - 1)).astype(np.intp)
+
+
+def column_states(keys: list[np.ndarray]) -> ColumnStates:
+    """Group equal entries of each column: ``keys`` (at most eight) are (n_particles, n) integer
+    arrays (e.g. the bits of x, y, z), entries being equal when all keys are.
+
+    A state is a run of equal entries in the hash order, so every state holds one value
+    exactly; a hash collision can only split a value into two states (the same sums, a few
+    more evaluations), never merge two values.
+    """
+    n_particles, n = keys[0].shape
+    by_column = [np.ascontiguousarray(k.T) for k in keys]  # (n, n_particles)
+    order = _sorted_by_value(by_column)
+    flat_order = order + (np.arange(n) * n_particles)[:, None]  # into the raveled columns
+    new_state = np.zeros((n, n_particles), dtype=bool)
+    new_state[:, 0] = True
+    for k in by_column:
+        ranked = k.ravel()[flat_order]
+        new_state[:, 1:] |= ranked[:, 1:] != ranked[:, :-1]
+    counts = new_state.sum(axis=1)
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    # Columns are consecutive rows here, so one running count numbers every state globally.
+    rank = (np.cumsum(new_state.ravel(), dtype=np.int64) - 1).reshape(n, n_particles)
+    ids = np.empty((n, n_particles), dtype=np.int64)
+    ids.ravel()[flat_order] = rank
+    holders = order[new_state]  # row-major: column by column, states in rank order
+    columns = np.repeat(np.arange(n), counts)
+    member_start = np.flatnonzero(new_state)
+    member_count = np.diff(np.append(member_start, n * n_particles))
+    local = (ids.T - offsets[None, :]).astype(np.int32)
+    return ColumnStates(ids.T, local, offsets, counts, holders, columns, order.ravel(),
+                        member_start, member_count)  # fmt: skip
+
+
+def float_bits(array: np.ndarray) -> np.ndarray:
+    """The bit pattern of a float32 array as uint32 (equal values, equal bits; -0.0 != 0.0)."""
+    return np.ascontiguousarray(array, dtype=np.float32).view(np.uint32)
+
+
+def candidate_columns(point_world, center_world, states, radius):
+    """(config column, point column) pairs whose state boxes come within ``radius`` (m).
+
+    Per column, the box of its point states and the box of its configs' ball centers (world);
+    pairs of boxes farther apart than the radius hold no pair that can penetrate.
+    """
+    def column_box(values, states):
+        starts = states.offsets
+        return (np.minimum.reduceat(values, starts, axis=1),
+                np.maximum.reduceat(values, starts, axis=1))  # fmt: skip
+
+    point_lo, point_hi = column_box(point_world.astype(np.float64), states)
+    center_lo, center_hi = column_box(center_world, states)
+    gap2 = np.zeros((center_lo.shape[1], point_lo.shape[1]))
+    for axis in range(3):
+        gap = np.maximum(point_lo[axis][None, :] - center_hi[axis][:, None],
+                         center_lo[axis][:, None] - point_hi[axis][None, :])  # fmt: skip
+        gap2 += np.maximum(gap, 0.0) ** 2
+    return np.nonzero(gap2 <= radius * radius)
+
+
+def held_state_pairs(config_column, point_column, states):
+    """The (config state, point state) pairs some particle holds in the given column pairs, as
+    global state numbers, each once: of a pair's count_c x count_p combinations, usually only a
+    few are held together (the particles' entries in two columns are not independent)."""
+    per_config = states.counts[point_column]
+    combos = states.counts[config_column] * per_config
+    start = np.cumsum(combos) - combos
+    held = np.zeros(int(combos.sum()), dtype=bool)
+    if held.size < 2**31:  # half the memory traffic in the n_particles x pairs step
+        per_config, start = per_config.astype(np.int32), start.astype(np.int32)
+    # Where a column has one state, every state of the other is held with it; elsewhere each
+    # particle marks the combination it holds (n_particles x pairs).
+    single = (states.counts[config_column] == 1) | (per_config == 1)
+    held[_ranges(start[single], combos[single])] = True
+    mixed = np.flatnonzero(~single)
+    combination = (start[mixed] + per_config[mixed] * states.local[:, config_column[mixed]]
+                   + states.local[:, point_column[mixed]])  # fmt: skip
+    held[combination.ravel()] = True
+    index = np.flatnonzero(held)
+    pair = np.searchsorted(start, index, side="right") - 1
+    config_local, point_local = np.divmod(index - start[pair], per_config[pair])
+    return (states.offsets[config_column[pair]] + config_local,
+            states.offsets[point_column[pair]] + point_local)  # fmt: skip
+
+
+def _ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Concatenated ranges [start, start + length) as one index array."""
+    within = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    return np.repeat(starts, lengths) + within
+
+
+def _state_table(points, configs, rotation_index):
+    """States of the contacts, with their values. A contact's point, config and orientation
+    change together (pxdyn moves both, ReplaceBad copies all three), so one grouping of the
+    three serves as both the point states and the config states."""
+    states = column_states([float_bits(a) for a in (*points, *configs)]
+                           + [rotation_index.astype(np.uint32)])  # fmt: skip
+    point_world = points[:, states.holders, states.columns]
+    config_world = configs[:, states.holders, states.columns]
+    slot = rotation_index[states.holders, states.columns].astype(np.int64)
+    return states, point_world, config_world, slot
+
+
+def _in_slot_frames(vectors, slot, frames_t, identity):
+    """(3, k) float32 coordinates of world ``vectors`` along the axes of each one's slot; an
+    exactly-identity slot leaves them as they are (as the per-orientation pass does)."""
+    if identity[slot].all():
+        return vectors
+    rotated = in_frame_float32(frames_t[slot], vectors)
+    return np.where(identity[slot][None, :], vectors, rotated)
+
+
+def _distinct(keys: np.ndarray, n_keys: int):
+    """(distinct keys ascending, index of each key among them) for keys in [0, n_keys)."""
+    present = np.zeros(n_keys, dtype=bool)
+    present[keys] = True
+    distinct = np.flatnonzero(present)
+    position = np.zeros(n_keys, dtype=np.int64)
+    position[distinct] = np.arange(distinct.size)
+    return distinct, position[keys]
+
+
+def _penetrating_state_pairs(grid, tolerance, region, config_state, point_state, offset, table,
+                             frames):  # fmt: skip
+    """The state pairs (and their float32 excess) that penetrate deeper than ``tolerance``.
+
+    ``offset`` (3, k) float32 is each pair's point minus config (world): for a config in an
+    exactly-identity orientation that is the difference the per-orientation pass forms.
+    """
+    slot = table[3]
+    frames_t, identity = frames
+    inverse_h = np.float32(1.0 / grid.resolution)
+    origin_cells = (grid.lower / grid.resolution).astype(np.float32)
+    pair_slot = slot[config_state]
+    which = np.flatnonzero(identity[pair_slot])
+    cells = [offset[a, which] * inverse_h - origin_cells[a] for a in range(3)]
+    rotated = np.flatnonzero(~identity[pair_slot])
+    if rotated.size:
+        # A plain float32 rotation (off by ~1e-7 m, far less than a cell) screens the pairs
+        # first; only those left are rotated with the exact rounding.
+        rough = np.einsum("kij,jk->ik", frames_t[pair_slot[rotated]], offset[:, rotated])
+        rough_cells = [rough[a] * inverse_h - origin_cells[a] for a in range(3)]
+        rotated = rotated[could_penetrate(grid, region, rough_cells, within_a_cell=True)]
+        exact = _rotated_differences(config_state[rotated], point_state[rotated], table, frames)
+        which = np.concatenate([which, rotated])
+        cells = [np.concatenate([c, e * inverse_h - o])
+                 for c, e, o in zip(cells, exact, origin_cells, strict=True)]  # fmt: skip
+    keep = np.flatnonzero(could_penetrate(grid, region, cells))
+    excess = np.maximum(-grid.at_cell_coordinates(*(c[keep] for c in cells)) - tolerance, 0.0)
+    hit = which[keep[excess > 0.0]]
+    return config_state[hit], point_state[hit], excess[excess > 0.0]
+
+
+def _rotated_differences(config_state, point_state, table, frames):
+    """Point minus config along the config's slot axes, (3, k) float32, as the per-orientation
+    pass forms it: both rotated (each (point state, slot) and config state once), then
+    subtracted."""
+    _, point_world, config_world, slot = table
+    frames_t, identity = frames
+    n_slots = len(frames_t)
+    pair_slot = slot[config_state]
+    point_key, point_of_pair = _distinct(point_state * n_slots + pair_slot,
+                                         point_world.shape[1] * n_slots)  # fmt: skip
+    points_e = _in_slot_frames(point_world[:, point_key // n_slots], point_key % n_slots,
+                               frames_t, identity)  # fmt: skip
+    config_key, config_of_pair = _distinct(config_state, config_world.shape[1])
+    configs_e = _in_slot_frames(config_world[:, config_key], slot[config_key], frames_t, identity)
+    return points_e[:, point_of_pair] - configs_e[:, config_of_pair]
+
+
+def penetrating_entries(grid, tolerance, region, points, configs, rotation_index, rotations,
+                        budget):  # fmt: skip
+    """Every (particle, slot, config, point, excess) whose pair penetrates beyond ``tolerance``.
+
+    Args:
+        grid: the robot's signed distance in frame E (m).
+        tolerance: penetration (m) ignored per pair.
+        region: :func:`deep_region` of the grid at this tolerance.
+        points, configs: (3, n_particles, n) float32 world positions (m).
+        rotation_index: (n_particles, n) orientation slot of each config.
+        rotations: (n_slots, 3, 3) R_WE of each slot.
+        budget: state pairs per vectorised block; bounds scratch memory.
+
+    Returns None when the particles share too few states for this to pay off.
+    """
+    empty = np.zeros(0, dtype=np.int64)
+    if region is None:
+        return empty, empty, empty, empty, np.zeros(0, dtype=np.float32)
+    center, radius = region.center, region.radius
+    n_particles = points.shape[1]
+    table = _state_table(points, configs, rotation_index)
+    states, point_world, config_world, slot = table
+    if states.counts.mean() > _MAX_STATES_PER_PARTICLE * n_particles:
+        return None  # particles too diverse: a pass over each particle's pairs is cheaper
+    rotations = np.asarray(rotations, dtype=np.float64)
+    frames = (np.transpose(rotations, (0, 2, 1)).astype(np.float32),
+              (rotations == np.eye(3)).all(axis=(1, 2)))  # fmt: skip
+    # The ball's center for each config state, in world coordinates.
+    center_world = config_world.astype(np.float64) + (rotations @ center)[slot].T
+    config_column, point_column = candidate_columns(point_world, center_world, states, radius)
+    # Column pairs in blocks of about ``budget`` (particle, column pair) entries.
+    block = max(1, int(budget) // n_particles)
+    held = [held_state_pairs(config_column[k : k + block], point_column[k : k + block], states)
+            for k in range(0, config_column.size, block)]
+    if sum(c.size for c, _ in held) > _MAX_STATE_PAIR_SHARE * n_particles * config_column.size:
+        return None  # particles too diverse: a pass over each particle's pairs is cheaper
+    hits = []
+    # The ball's center relative to each config state (world); float32 rounding (~1e-7 m) is
+    # far inside the ball's one-cell slack.
+    center_shift = (rotations @ center)[slot].T.astype(np.float32)
+    radius2 = np.float32(radius * radius)
+    for config_state, point_state in held:
+        offset = point_world[:, point_state] - config_world[:, config_state]
+        distance2 = np.zeros(config_state.size, dtype=np.float32)
+        for axis in range(3):
+            distance2 += (offset[axis] - center_shift[axis, config_state]) ** 2
+        near = np.flatnonzero(distance2 <= radius2)
+        hits.append(_penetrating_state_pairs(grid, tolerance, region, config_state[near],
+                                             point_state[near], offset[:, near], table,
+                                             frames))  # fmt: skip
+    if not hits:
+        return empty, empty, empty, empty, np.zeros(0, dtype=np.float32)
+    config_state, point_state, excess = (np.concatenate(v) for v in zip(*hits, strict=True))
+    particle, which = _holders_of_both(config_state, point_state, states)
+    return (particle, slot[config_state[which]], states.columns[config_state[which]],
+            states.columns[point_state[which]], excess[which])  # fmt: skip
+
+
+def _holders_of_both(config_state, point_state, states):
+    """(particle, pair) for every particle holding both states of a pair: the members of the
+    state with fewer members whose entry in the other's column is in the other state."""
+    by_config = states.member_count[config_state] <= states.member_count[point_state]
+    listed = np.where(by_config, config_state, point_state)
+    other = np.where(by_config, point_state, config_state)
+    count = states.member_count[listed]
+    pair = np.repeat(np.arange(listed.size), count)
+    particle = states.members[_ranges(states.member_start[listed], count)]
+    holds = states.ids[particle, states.columns[other][pair]] == other[pair]
+    return particle[holds], pair[holds]
+
+
+def ordered_sums(entries, n_particles: int, n_points: int):
+    """per_particle (n_particles,) and per_point (n_particles, n_points) float64 sums of the
+    entries' excess, added in the order of a per-particle, per-orientation pass (module doc)."""
+    particle, slot, config, point, excess = entries
+    per_particle = np.zeros(n_particles)
+    per_point = np.zeros((n_particles, n_points))
+    if particle.size == 0:
+        return per_particle, per_point
+    n_slots = int(slot.max()) + 1
+    weights = excess.astype(np.float64)
+
+    def folded(outer, inner):
+        """Sum in (outer, slot, inner) order, each slot's subtotal added to the running total
+        of its ``outer`` group (bincount adds in input order, one addition per entry)."""
+        key = (outer * n_slots + slot) * (n_points * n_points) + inner
+        order = np.argsort(key, kind="stable")
+        group = (outer * n_slots + slot)[order]
+        first = np.ones(group.size, dtype=bool)
+        first[1:] = group[1:] != group[:-1]
+        subtotal = np.bincount(np.cumsum(first) - 1, weights[order])
+        return outer[order][first], subtotal
+
+    rows, subtotal = folded(particle, config * n_points + point)
+    per_particle += np.bincount(rows, subtotal, minlength=n_particles)
+    rows, subtotal = folded(particle * n_points + point, config)
+    per_point += np.bincount(rows, subtotal, minlength=n_particles * n_points).reshape(
+        n_particles, n_points
+    )
+    return per_particle, per_point
