@@ -126,3 +126,21 @@ def test_deduplicated_penetration_sums_equal_the_per_particle_path(spread):
     assert slow[0].max() > 0.0  # the case has penetrating pairs
     np.testing.assert_allclose(fast[0], slow[0], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(fast[1], slow[1], rtol=1e-9, atol=1e-12)
+
+
+def test_pxpen_refuses_a_grid_that_cuts_the_robot():
+    """Beyond its grid a point counts as outside the robot: exact only if the grid encloses
+    the robot. A 2 cm-radius cylinder on a grid reaching only 1.5 cm from its axis is refused."""
+    cylinder = CylinderSdf(0.02, 0.05)
+    cut = GridSdf.build(cylinder, [-0.015, -0.015, -0.06], [0.015, 0.015, 0.06], 0.002)
+    with pytest.raises(ValueError, match="does not enclose the robot") as info:
+        RobotPenetration(cut)
+    assert "\n" not in str(info.value)
+    enclosing = GridSdf.build(cylinder, [-0.03, -0.03, -0.06], [0.03, 0.03, 0.06], 0.002)
+    pxpen = RobotPenetration(enclosing)
+    # A point 4 cm from the axis, beyond the grid: the cylinder's own distance says outside.
+    beyond = np.array([[0.04, 0.0, 0.0]])
+    assert cylinder(beyond)[0] > 0
+    assert pxpen(np.zeros(3), beyond)[0] == 0.0
+    # Inside: the grid's depth matches the cylinder's (1 cm deep at 1 cm from the axis).
+    np.testing.assert_allclose(pxpen(np.zeros(3), [[0.01, 0.0, 0.0]]), [0.01], atol=1e-3)

@@ -23,12 +23,31 @@ def _in_frame(rotation: np.ndarray, array: np.ndarray) -> np.ndarray:
     return np.tensordot(rotation.T.astype(np.float32), array, axes=1)
 
 
+def _check_encloses_robot(grid: GridSdf) -> None:
+    """Refuses a grid the robot reaches the boundary of.
+
+    A point beyond the grid counts as outside the robot (no penetration). That is exact only
+    when the robot lies inside the grid: every boundary node outside the robot (positive), so
+    the interpolated surface never meets the grid's faces.
+    """
+    v = grid.values
+    faces = (v[0], v[-1], v[:, 0], v[:, -1], v[:, :, 0], v[:, :, -1])
+    lowest = min(float(face.min()) for face in faces)
+    if lowest <= 0.0:
+        raise ValueError(
+            f"robot_sdf: the grid does not enclose the robot (a boundary node has signed "
+            f"distance {lowest:.4g} m <= 0); build it over a box with a margin around the robot"
+        )
+
+
 class RobotPenetration:
     """The paper's pxpen(x, p): penetration depth (m) of point p into the robot at EE pose x.
 
     The robot's geometry is a :class:`~stucco_drake.core.sdf.GridSdf` in the end-effector frame E
     (for the Drake scene, built once from Drake's distance queries and cached). A pose x is
-    (p_WE, R_WE): a world point p_W is looked up at p_E = R_WE^T (p_W - p_WE).
+    (p_WE, R_WE): a world point p_W is looked up at p_E = R_WE^T (p_W - p_WE). The grid must
+    enclose the robot (every boundary node positive; a ValueError otherwise), so a point beyond
+    it is outside the robot and its penetration, 0, is exact.
 
     Args:
         robot_sdf: signed distance of the robot in frame E (m, negative inside).
@@ -40,6 +59,7 @@ class RobotPenetration:
     def __init__(self, robot_sdf: GridSdf, pair_budget: int = 1 << 20, deduplicate: bool = True):
         if not isinstance(robot_sdf, GridSdf):
             raise ValueError(f"robot_sdf: expected a GridSdf, got {type(robot_sdf).__name__}")
+        _check_encloses_robot(robot_sdf)
         self.robot_sdf = robot_sdf
         self.pair_budget = int(pair_budget)
         self.deduplicate = bool(deduplicate)
