@@ -4,6 +4,7 @@ Nothing in this package imports Drake, so it is testable in milliseconds without
 """
 
 from stucco_drake.core.dynamics import TranslationDynamics
+from stucco_drake.core.function_penetration import FunctionPenetration
 from stucco_drake.core.metrics import (
     ambiguity,
     contact_error,
@@ -25,6 +26,7 @@ __all__ = [
     "ActionContacts",
     "BoxSdf",
     "CylinderSdf",
+    "FunctionPenetration",
     "GridSdf",
     "RobotPenetration",
     "SoftTracker",

@@ -23,6 +23,32 @@ def _in_frame(rotation: np.ndarray, array: np.ndarray) -> np.ndarray:
     return np.tensordot(rotation.T.astype(np.float32), array, axes=1)
 
 
+def per_orientation_sums(excess_sums, points, configs, rotation_index, rotations, tolerance):
+    """All-pairs excess sums (see ``RobotPenetration.all_pairs_excess_sums``) by one
+    ``excess_sums(points_e, configs_e, tolerance)`` pass per orientation slot, each over only
+    the configs held at that slot (the others NaN, skipped)."""
+    if len(rotations) == 1:
+        return excess_sums(_in_frame(rotations[0], points),
+                           _in_frame(rotations[0], configs), tolerance)  # fmt: skip
+    per_particle = np.zeros(points.shape[1])
+    per_point = np.zeros(points.shape[1:])
+    for index, rotation in enumerate(rotations):
+        in_group = rotation_index == index
+        # Only the columns some particle holds in this orientation: a closed-loop run has
+        # about one orientation per action, so each pass checks a few configs, not all n.
+        columns = np.flatnonzero(in_group.any(axis=0))
+        if columns.size == 0:
+            continue
+        group_configs = np.where(
+            in_group[:, columns], _in_frame(rotation, configs[:, :, columns]), np.nan
+        )
+        a, b = excess_sums(_in_frame(rotation, points), group_configs.astype(np.float32),
+                           tolerance)  # fmt: skip
+        per_particle += a
+        per_point += b
+    return per_particle, per_point
+
+
 def _check_encloses_robot(grid: GridSdf) -> None:
     """Refuses a grid the robot reaches the boundary of.
 
@@ -107,28 +133,9 @@ class RobotPenetration:
     def _per_orientation_sums(self, points, configs, rotation_index, rotations, tolerance):
         """:meth:`all_pairs_excess_sums` by one :meth:`excess_sums` pass per orientation slot
         (each particle's pairs checked separately): for particles that share few states."""
-        if len(rotations) == 1:
-            return self.excess_sums(_in_frame(rotations[0], points),
-                                    _in_frame(rotations[0], configs), tolerance)  # fmt: skip
-        per_particle = np.zeros(points.shape[1])
-        per_point = np.zeros(points.shape[1:])
-        for index, rotation in enumerate(rotations):
-            in_group = rotation_index == index
-            # Only the columns some particle holds in this orientation: a closed-loop run has
-            # about one orientation per action, so each pass checks a few configs, not all n.
-            columns = np.flatnonzero(in_group.any(axis=0))
-            if columns.size == 0:
-                continue
-            group_configs = np.where(
-                in_group[:, columns], _in_frame(rotation, configs[:, :, columns]), np.nan
-            )
-            a, b = self.excess_sums(_in_frame(rotation, points),
-                                    group_configs.astype(np.float32), tolerance)  # fmt: skip
-            per_particle += a
-            per_point += b
-        return per_particle, per_point
+        return per_orientation_sums(self.excess_sums, points, configs, rotation_index,
+                                    rotations, tolerance)  # fmt: skip
 
-    # -------------------------------------------------------------------------------- hot path
     def _buffer(self, name: str, size: int, dtype) -> np.ndarray:
         """Reused scratch memory: fresh multi-megabyte arrays cost page faults on every call."""
         buffer = self._workspace.get(name)

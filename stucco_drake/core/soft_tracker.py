@@ -56,7 +56,10 @@ class SoftTracker:
        code expands only one level from each seed.
 
     Args:
-        penetration: pxpen, the robot's geometry in the end-effector frame.
+        penetration: pxpen, the robot's geometry in the end-effector frame: a
+            :class:`~stucco_drake.core.penetration.RobotPenetration` (a grid, the fast
+            default) or a :class:`~stucco_drake.core.function_penetration.FunctionPenetration`
+            (any batched signed-distance function of the user's).
         params: tracker parameters (defaults: paper Table I, simulation).
         dynamics: pxdyn (default: translation with the end effector, paper Sec. V).
     """
@@ -68,6 +71,9 @@ class SoftTracker:
         dynamics: ContactDynamics | None = None,
     ):
         self.params = params or SoftTrackingParams.sim()
+        if self.params.touched_side_margin is not None and penetration.robot_sdf is None:
+            raise ValueError("SoftTracker: the touched-side rule needs the robot's surface "
+                             "normals, a grid pxpen (RobotPenetration)")  # fmt: skip
         self.penetration = penetration
         self.dynamics = dynamics or TranslationDynamics()
         n = self.params.n_particles
