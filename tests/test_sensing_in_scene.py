@@ -35,8 +35,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
-from stucco_drake.bor.diagram import _arm_selectors
-from stucco_drake.robot.models import bubble_bodies, iiwa_observed_robot_arguments
+from stucco_drake.robot.models import IIWA_ARM_JOINTS, bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import build_scene, load_scene_text
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
@@ -173,6 +172,22 @@ class GripperObjectContacts(LeafSystem):
         output.SetFromVector(out)
 
 
+def arm_selectors(robot_plant):
+    """(S, T): arm state [q; v] (14) = S x_robot, arm torques (7) = T tau_robot."""
+    arm = robot_plant.GetModelInstanceByName(IIWA)
+    nq, nv = robot_plant.num_positions(), robot_plant.num_velocities()
+    N_ARM = len(IIWA_ARM_JOINTS)
+    S, T = np.zeros((2 * N_ARM, nq + nv)), np.zeros((N_ARM, nv))
+    joints = [robot_plant.get_joint(j) for j in robot_plant.GetJointIndices(arm)]
+    joints = sorted((j for j in joints if j.num_velocities() == 1), key=lambda j: j.name())
+    for k, joint in enumerate(joints):  # iiwa_joint_1 .. iiwa_joint_7 sort in order
+        S[k, joint.position_start()] = 1.0
+        S[N_ARM + k, nq + joint.velocity_start()] = 1.0
+        T[k, joint.velocity_start()] = 1.0
+    return S, T
+
+
+
 def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     """Simulates a scene with the sensing chain; returns per-step logs and per-action flags."""
     scene = load_scene_text(scene_text(objects, actions, finger))
@@ -182,7 +197,7 @@ def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     X_WB = robot_base_pose(scene)
     builder = DiagramBuilder()
     sub = builder.AddSystem(built.diagram)
-    S, T = _arm_selectors(built.robot_plant)
+    S, T = arm_selectors(built.robot_plant)
     arm_state, arm_torque = builder.AddSystem(MatrixGain(S)), builder.AddSystem(MatrixGain(T))
     builder.Connect(sub.GetOutputPort("robot_state"), arm_state.get_input_port())
     builder.Connect(sub.GetOutputPort("applied_torque"), arm_torque.get_input_port())

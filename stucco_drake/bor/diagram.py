@@ -32,7 +32,7 @@ from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.robot.gripper_sdf import gripper_penetration
-from stucco_drake.robot.models import IIWA_ARM_JOINTS, bubble_bodies, iiwa_observed_robot_arguments
+from stucco_drake.robot.models import bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.action_contacts_assembler import (
@@ -219,21 +219,6 @@ class RobotObjectContacts:
 
 
 # --------------------------------------------------------------------------------- building
-def _arm_selectors(robot_plant: MultibodyPlant):
-    """(S, T): arm state [q; v] (14) = S x_robot, arm torques (7) = T tau_robot."""
-    arm = robot_plant.GetModelInstanceByName(IIWA)
-    nq, nv = robot_plant.num_positions(), robot_plant.num_velocities()
-    N_ARM = len(IIWA_ARM_JOINTS)
-    S, T = np.zeros((2 * N_ARM, nq + nv)), np.zeros((N_ARM, nv))
-    joints = [robot_plant.get_joint(j) for j in robot_plant.GetJointIndices(arm)]
-    joints = sorted((j for j in joints if j.num_velocities() == 1), key=lambda j: j.name())
-    for k, joint in enumerate(joints):  # iiwa_joint_1 .. iiwa_joint_7 sort in order
-        S[k, joint.position_start()] = 1.0
-        S[N_ARM + k, nq + joint.velocity_start()] = 1.0
-        T[k, joint.velocity_start()] = 1.0
-    return S, T
-
-
 def _seeds(seed: int) -> list[int]:
     """Independent integer seeds of the tracker, the ICP restarts and the CPF from one seed."""
     return [int(s) for s in np.random.SeedSequence(seed).generate_state(3)]
