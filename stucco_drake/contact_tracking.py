@@ -11,6 +11,15 @@ and returns them with their named output ports, the way a hardware station expor
 It builds no robot: the robot model (:class:`~stucco_drake.systems.observed_robot.ObservedRobot`)
 and the output ports it reads come from the caller. Our BOR Diagram
 (:mod:`stucco_drake.bor.diagram`) is this chain around the iiwa scene.
+
+The detector needs the estimator's free-space wrench statistics (``residual_statistics`` in
+``estimator_kwargs``; the paper's Eq. 1). For our iiwa,
+:func:`~stucco_drake.systems.contact_detector.calibrate_residual_statistics` runs random
+free-space motions and caches the fit. For another robot: run your Diagram with this chain in
+free space (no contact), log the estimator's ``ee_wrench`` output
+(``chain.estimator.GetOutputPort("ee_wrench")``) over a few seconds of motion like your task's,
+and fit it with :func:`stucco_drake.core.detection.fit_residual_statistics` (samples, floor
+std): the uncalibrated default flags ordinary arm dynamics as contact.
 """
 
 from __future__ import annotations
