@@ -19,7 +19,7 @@ free-space motions and caches the fit. For another robot: run your Diagram with 
 free space (no contact), log the estimator's ``ee_wrench`` output
 (``chain.estimator.GetOutputPort("ee_wrench")``) over a few seconds of motion like your task's,
 and fit it with :func:`stucco_drake.core.detection.fit_residual_statistics` (samples, floor
-std): the uncalibrated default flags ordinary arm dynamics as contact.
+std); the uncalibrated default is only for wiring.
 """
 
 from __future__ import annotations
