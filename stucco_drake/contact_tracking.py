@@ -137,6 +137,7 @@ def add_contact_tracking(
             state it reads (see :class:`ActionContactsAssembler`).
         dx_model: how tracked contact points move (see :class:`SoftTrackingFilter`).
     """
+    _check_arguments(penetration, truth, truth_state)
     h = float(time_step)
     joint_state, joint_torque = _observed_joints(builder, robot, robot_state, applied_torque)
     estimator = builder.AddNamedSystem(
@@ -171,6 +172,15 @@ def add_contact_tracking(
     if truth is not None:
         chain.outputs["action_truth"] = assembler.GetOutputPort("action_truth")
     return chain
+
+
+def _check_arguments(penetration, truth, truth_state) -> None:
+    """One-line errors before anything is added."""
+    if getattr(penetration, "robot_sdf", None) is None:
+        raise ValueError("add_contact_tracking: penetration must be a grid pxpen "
+                         "(RobotPenetration): the target pose estimator reads its grid")
+    if (truth is None) != (truth_state is None):
+        raise ValueError("add_contact_tracking: truth and truth_state go together")
 
 
 def _add_isolator(builder, h, cpf_seed, isolator_kwargs, estimator, pose, detector, bubbles):

@@ -132,3 +132,21 @@ def test_observed_robot_rejects_bad_arguments():
     unfinalized = MultibodyPlant(0.0)
     with pytest.raises(ValueError, match="finalized"):
         ObservedRobot(unfinalized, unfinalized.world_frame())
+
+
+def test_contact_tracking_refuses_bad_arguments_before_adding_anything():
+    from pydrake.systems.framework import DiagramBuilder
+
+    from stucco_drake.contact_tracking import add_contact_tracking
+    from stucco_drake.core import BoxSdf, CylinderSdf, FunctionPenetration, SoftTracker
+
+    model = planar_arm(MultibodyPlant(0.0))
+    robot = ObservedRobot(model, model.GetFrameByName("tip"))
+    builder = DiagramBuilder()
+    pxpen = FunctionPenetration(CylinderSdf(0.02, 0.05))
+    kwargs = dict(robot_state=None, applied_torque=None, action_index=None, time_step=H,
+                  tracker=SoftTracker(pxpen), tracker_seed=0, target_shape=BoxSdf((1, 1, 1)),
+                  icp_seed=0, cpf_seed=0)  # fmt: skip
+    with pytest.raises(ValueError, match="grid pxpen"):
+        add_contact_tracking(builder, robot, penetration=pxpen, **kwargs)
+    assert builder.GetSystems() == []
