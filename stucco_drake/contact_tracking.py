@@ -210,14 +210,21 @@ def _add_tracking(builder, h, assembler, tracker, tracker_seed, penetration, tar
     return tracking, target
 
 
-def _observed_joints(builder, robot: ObservedRobot, robot_state, applied_torque):
-    """Selector systems taking the observed joints' [q; v] and torques out of the robot's."""
+def observed_joint_selectors(robot: ObservedRobot) -> tuple[np.ndarray, np.ndarray]:
+    """(S, T): the observed joints' [q; v] = S [q; v] and torques = T tau of the robot plant's
+    full vectors (0/1 matrices, for ``MatrixGain``)."""
     nv, n = robot.plant.num_velocities(), robot.n
     S, T = np.zeros((2 * n, 2 * nv)), np.zeros((n, nv))
     rows = np.arange(n)
     S[rows, robot.joints] = 1.0
     S[n + rows, nv + robot.joints] = 1.0
     T[rows, robot.joints] = 1.0
+    return S, T
+
+
+def _observed_joints(builder, robot: ObservedRobot, robot_state, applied_torque):
+    """Selector systems taking the observed joints' [q; v] and torques out of the robot's."""
+    S, T = observed_joint_selectors(robot)
     state = builder.AddNamedSystem("observed_state", MatrixGain(S))
     torque = builder.AddNamedSystem("observed_torque", MatrixGain(T))
     builder.Connect(robot_state, state.get_input_port())
@@ -236,4 +243,5 @@ def _add_tactile(builder: DiagramBuilder, h: float, tactile: Tactile | None):
     return bubbles
 
 
-__all__ = ["OUTPUTS", "ContactTracking", "Tactile", "add_contact_tracking"]
+__all__ = ["OUTPUTS", "ContactTracking", "Tactile", "add_contact_tracking",
+           "observed_joint_selectors"]

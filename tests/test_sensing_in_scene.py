@@ -35,7 +35,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
-from stucco_drake.robot.models import IIWA_ARM_JOINTS, bubble_bodies, iiwa_observed_robot_arguments
+from stucco_drake.contact_tracking import observed_joint_selectors
+from stucco_drake.robot.models import bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import build_scene, load_scene_text
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
@@ -172,21 +173,6 @@ class GripperObjectContacts(LeafSystem):
         output.SetFromVector(out)
 
 
-def arm_selectors(robot_plant):
-    """(S, T): arm state [q; v] (14) = S x_robot, arm torques (7) = T tau_robot."""
-    arm = robot_plant.GetModelInstanceByName(IIWA)
-    nq, nv = robot_plant.num_positions(), robot_plant.num_velocities()
-    N_ARM = len(IIWA_ARM_JOINTS)
-    S, T = np.zeros((2 * N_ARM, nq + nv)), np.zeros((N_ARM, nv))
-    joints = [robot_plant.get_joint(j) for j in robot_plant.GetJointIndices(arm)]
-    joints = sorted((j for j in joints if j.num_velocities() == 1), key=lambda j: j.name())
-    for k, joint in enumerate(joints):  # iiwa_joint_1 .. iiwa_joint_7 sort in order
-        S[k, joint.position_start()] = 1.0
-        S[N_ARM + k, nq + joint.velocity_start()] = 1.0
-        T[k, joint.velocity_start()] = 1.0
-    return S, T
-
-
 
 def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     """Simulates a scene with the sensing chain; returns per-step logs and per-action flags."""
@@ -197,14 +183,15 @@ def run_scene(objects, actions, finger, *, lock_fingers, cache_dir):
     X_WB = robot_base_pose(scene)
     builder = DiagramBuilder()
     sub = builder.AddSystem(built.diagram)
-    S, T = arm_selectors(built.robot_plant)
+    iiwa = ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))
+    S, T = observed_joint_selectors(iiwa)
     arm_state, arm_torque = builder.AddSystem(MatrixGain(S)), builder.AddSystem(MatrixGain(T))
     builder.Connect(sub.GetOutputPort("robot_state"), arm_state.get_input_port())
     builder.Connect(sub.GetOutputPort("applied_torque"), arm_torque.get_input_port())
     stats = calibrate_residual_statistics(time_step=h, estimator_kwargs={"gain": GAIN},
                                           cache_dir=cache_dir)  # fmt: skip
     estimator = builder.AddSystem(ExternalWrenchEstimator(
-        h, ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers)), gain=GAIN,
+        h, iiwa, gain=GAIN,
         residual_statistics=stats,
         sampled_plant_outputs=bool(scene.plant.use_sampled_output_ports),
     ))  # fmt: skip
