@@ -274,7 +274,10 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
         found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log))
         if found is None:
             return None
-        pose, clutter = found.pose, points[~found.explained[found.chosen]]
+        # The clutter where the chosen hypothesis has the points: between sensed and tracked.
+        scale = 1.0 if found.motion_scales is None else found.motion_scales[found.chosen]
+        placed = log.contact_points + scale * (points - log.contact_points)
+        pose, clutter = found.pose, placed[~found.explained[found.chosen]]
     else:
         raise ValueError(f"estimator: expected 'rules' or 'hypotheses', got {estimator!r}")
     simulator = Simulator(built.diagram)

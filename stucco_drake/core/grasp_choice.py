@@ -60,8 +60,13 @@ def grasp_at(poses, shape: BoxSdf | CylinderSdf, closing_yaw: float = 0.0) -> np
     return np.column_stack([xy, yaw])
 
 
-def grasp_closes(grasps, poses, shape: BoxSdf | CylinderSdf) -> np.ndarray:
+def grasp_closes(grasps, poses, shape: BoxSdf | CylinderSdf, margin: float = 0.0,
+                 angle_margin: float = 0.0) -> np.ndarray:  # fmt: skip
     """(G, H) whether each grasp (G, 3) closes on the target at each pose (H, 3).
+
+    ``margin`` (m) and ``angle_margin`` (rad) tighten every bound below by that much (0: the
+    paper's criterion), so that a grasp passing them still closes on a target up to about
+    that far from the pose.
 
     With p the grasp centre in the target frame O and u the closing axis there:
 
@@ -82,14 +87,15 @@ def grasp_closes(grasps, poses, shape: BoxSdf | CylinderSdf) -> np.ndarray:
         a, b = sorted((hx, hy))
         angle = np.arccos(np.minimum(1.0, np.abs(u[..., short])))
         reach = np.abs(p[..., long_]) + a * np.tan(angle)
-        return (angle <= MAX_AXIS_ERROR) & (np.abs(p[..., short]) < a) & (reach <= b - EDGE_MARGIN)
+        return ((angle <= MAX_AXIS_ERROR - angle_margin) & (np.abs(p[..., short]) < a - margin)
+                & (reach <= b - EDGE_MARGIN - margin))  # fmt: skip
     if isinstance(shape, CylinderSdf):
         r, w = shape.radius, PAD_HALF_WIDTH
         axis = -p  # the can's axis relative to the grasp centre
         s = np.sum(axis * u, axis=-1)
         d = np.abs(axis[..., 0] * u[..., 1] - axis[..., 1] * u[..., 0])
         covered = np.maximum(0.0, np.minimum(d + w, r) - np.maximum(d - w, -r))
-        return (covered > r) & (np.abs(s) < r)
+        return (covered > r + margin) & (np.abs(s) < r - margin)
     raise TypeError(f"unsupported target shape {type(shape).__name__}")
 
 
@@ -120,7 +126,8 @@ def _weighted_mean_pose(poses, weights, shape) -> np.ndarray:
 
 
 def choose_grasp(poses, weights, shape: BoxSdf | CylinderSdf, *, closing_yaw: float = 0.0,
-                 tolerance: float = 0.01) -> GraspChoice:  # fmt: skip
+                 tolerance: float = 0.01, margin: float = 0.0,
+                 angle_margin: float = 0.0) -> GraspChoice:  # fmt: skip
     """The grasp most likely to close on the target over weighted pose hypotheses.
 
     Candidates are the grasp at each hypothesis (:func:`grasp_at`) and at two weighted means:
@@ -136,6 +143,9 @@ def choose_grasp(poses, weights, shape: BoxSdf | CylinderSdf, *, closing_yaw: fl
         shape: the target's geometry in its frame O.
         closing_yaw: a cylinder's closing yaw (rad, world).
         tolerance: probability difference below which candidates count as equal.
+        margin, angle_margin: a grasp counts as closing under a hypothesis only with this
+            much to spare (m, rad; see :func:`grasp_closes`): a grasp on the edge of closing
+            under two hypotheses closes under neither once the truth lies a little off both.
     """
     poses = as_finite_array(np.asarray(poses, dtype=np.float64).reshape(-1, 3), "poses",
                             (None, 3))  # fmt: skip
@@ -145,7 +155,7 @@ def choose_grasp(poses, weights, shape: BoxSdf | CylinderSdf, *, closing_yaw: fl
                          "with a positive sum")
     weights = weights / weights.sum()
     grasps = grasp_at(poses, shape, closing_yaw)
-    closes = grasp_closes(grasps, poses, shape)
+    closes = grasp_closes(grasps, poses, shape, margin, angle_margin)
     probability = np.round(closes.astype(np.float64) @ weights, 12)
     best = int(np.argmax(probability >= probability.max() - tolerance))
     choice = GraspChoice(poses[best], grasps[best], float(probability[best]))
@@ -153,7 +163,8 @@ def choose_grasp(poses, weights, shape: BoxSdf | CylinderSdf, *, closing_yaw: fl
     means = np.array([_weighted_mean_pose(poses[closes[best]], weights[closes[best]], shape),
                       _weighted_mean_pose(poses, weights, shape)])  # fmt: skip
     mean_grasps = grasp_at(means, shape, closing_yaw)
-    mean_probability = np.round(grasp_closes(mean_grasps, poses, shape) @ weights, 12)
+    mean_probability = np.round(
+        grasp_closes(mean_grasps, poses, shape, margin, angle_margin) @ weights, 12)
     k = int(np.argmax(mean_probability))
     if mean_probability[k] > choice.probability + tolerance:
         choice = GraspChoice(means[k], mean_grasps[k], float(mean_probability[k]))

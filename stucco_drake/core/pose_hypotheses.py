@@ -11,9 +11,11 @@ RSS 2023: contact points lie on the object's surface, free-space points outside 
   *explains* it when that is the surface. ``sigma_i`` adds the point's spread over the
   tracker's particles to the sensor's noise, so points the filter is unsure of count less.
 - **Free space.** Where the gripper was after the target was last touched, the target is not:
-  the posed target's cross-section must not penetrate the robot (its own geometry, pxpen) at
-  those configs. Earlier configs do not count, since the target may have been pushed there since.
-  Penetration beyond a tolerance costs ``depth / free_space_scale`` per (config, point) pair.
+  the posed target's cross-section must not lie inside the robot (its own geometry, pxpen) at
+  those configs: each action's end, and every few millimetres along each push that sensed
+  nothing (:mod:`~stucco_drake.core.free_space`). Earlier configs do not count, since the
+  target may have been pushed there since. Each cross-section point's deepest penetration
+  beyond a tolerance over those configs costs ``depth / free_space_scale``.
 - **Shape.** Only poses of the known outline are proposed: ICP of the outline on every segment
   of tracked points, on every part of a segment wider than the target, and on every union of
   two segments the target could span; each is then refitted on the points it explains.
@@ -34,10 +36,11 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
+from stucco_drake.core.free_space import SweptSlice, swept_configs
 from stucco_drake.core.grasp_choice import choose_grasp
 from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
 from stucco_drake.core.penetration import RobotPenetration
-from stucco_drake.core.pose_penetration import restart_penetration, sample_cross_section
+from stucco_drake.core.pose_penetration import sample_cross_section
 from stucco_drake.core.segment_extent import outline_extent, split_wider_segments, xy_extent
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.validation import as_finite_array
@@ -65,6 +68,11 @@ class HypothesisParams:
         n_candidates: grid poses with the lowest contact cost kept as candidates.
         n_polish: candidates (lowest full cost) refitted on the points each explains.
         polish_iterations: refits of each (explain, fit, repeat).
+        sweep_spacing: spacing of the configs swept along a push that sensed nothing.
+        raster_resolution: cell size of the free-space slice.
+        grasp_margin, grasp_angle_margin: how much to spare (m, rad) a grasp needs to count
+            as closing under a hypothesis when the grasp is chosen and its confidence formed
+            (:func:`~stucco_drake.core.grasp_choice.choose_grasp`).
     """
 
     contact_noise: float = 0.004
@@ -81,6 +89,10 @@ class HypothesisParams:
     n_candidates: int = 300
     n_polish: int = 30
     polish_iterations: int = 5
+    sweep_spacing: float = 0.005
+    raster_resolution: float = 0.0025
+    grasp_margin: float = 0.01
+    grasp_angle_margin: float = np.radians(5.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,16 +101,21 @@ class FreeSpace:
 
     Attributes:
         penetration: the robot's pxpen.
-        positions: (k, 3) end-effector origins in W (m), one per action, oldest first.
+        positions: (k, 3) end-effector origins in W (m), one per action (at its end), oldest
+            first.
         rotation: (3, 3) R_WE shared by all configs (None: identity).
         point_steps: (n,) index into ``positions`` of the config at which each contact point
             was sensed (the point's action).
+        free_actions: (k,) whether each action sensed no contact: its straight path from the
+            previous action's end is swept (see :mod:`~stucco_drake.core.free_space`); None:
+            only the configs at the actions' ends count.
     """
 
     penetration: RobotPenetration
     positions: np.ndarray
     rotation: np.ndarray | None
     point_steps: np.ndarray
+    free_actions: np.ndarray | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,6 +133,9 @@ class PoseHypotheses:
         chosen: index of the hypothesis nearest ``pose``.
         pose: (3,) the target pose (x, y, yaw) to grasp at (see
             :func:`~stucco_drake.core.grasp_choice.choose_grasp`).
+        motion_scales: (k,) each hypothesis's motion scale (see
+            :mod:`~stucco_drake.core.motion_scale`); None when the points were taken as
+            tracked.
     """
 
     poses: np.ndarray
@@ -125,6 +145,7 @@ class PoseHypotheses:
     confidence: float
     chosen: int
     pose: np.ndarray
+    motion_scales: np.ndarray | None = None
 
 
 def point_spread(particle_points, log_weights) -> np.ndarray:
@@ -159,27 +180,48 @@ def contact_costs(poses, points, sigma, shape, params: HypothesisParams):
     return np.minimum(on_surface, elsewhere).sum(axis=1), explained
 
 
-def free_space_costs(poses, explained, height: float, free: FreeSpace | None, fill,
-                     params: HypothesisParams) -> np.ndarray:  # fmt: skip
-    """(B,) free-space cost of each pose, its cross-section ``fill`` posed at ``height`` (m):
-    its penetration into the robot at the configs since the last action that sensed a point
-    it explains (all configs when it explains none). Poses sharing that action go in one
-    batch."""
-    costs = np.zeros(len(poses))
+def swept_slice(free: FreeSpace | None, height: float,
+                params: HypothesisParams) -> SweptSlice | None:  # fmt: skip
+    """The robot's free space on the slice at ``height`` (m) since each action, or None
+    without any config."""
     if free is None or len(free.positions) == 0:
-        return costs
-    firsts = np.array([int(free.point_steps[e].max()) if e.any() else 0 for e in explained])
-    for first in np.unique(firsts):
-        batch = firsts == first
-        depth = restart_penetration(free.penetration, poses[batch], fill, height,
-                                    free.positions[first:], free.rotation,
-                                    params.free_space_tolerance)  # fmt: skip
-        costs[batch] = depth / params.free_space_scale
+        return None
+    flags = (np.zeros(len(free.positions), dtype=bool) if free.free_actions is None
+             else free.free_actions)  # fmt: skip
+    configs, actions = swept_configs(free.positions, flags, params.sweep_spacing)
+    return SweptSlice.build(free.penetration, configs, actions, len(free.positions),
+                            free.rotation, height, params.raster_resolution)  # fmt: skip
+
+
+def free_space_costs(poses, explained, swept: SweptSlice | None, point_steps, fill,
+                     params: HypothesisParams) -> np.ndarray:  # fmt: skip
+    """(B,) free-space cost of each pose, its cross-section ``fill`` ((m, 2) in O) posed on
+    the slice: the depth beyond ``free_space_tolerance`` to which each of its points lay
+    inside the robot at any config since the last action that sensed a point the pose
+    explains (all configs when it explains none), summed over the points, per
+    ``free_space_scale``."""
+    if swept is None:
+        return np.zeros(len(poses))
+    steps = np.where(explained, np.asarray(point_steps)[None], -1).max(axis=1)
+    since = np.maximum(steps, 0)
+    costs = np.empty(len(poses))
+    block = max(1, (1 << 20) // len(fill))
+    for k in range(0, len(poses), block):
+        x, y, yaw = poses[k:k + block, :, None].transpose(1, 0, 2)
+        c, s = np.cos(yaw), np.sin(yaw)
+        # The posed fill, R(yaw) f + (x, y), as two (b, m) planes (cheaper than a (b, m, 2)
+        # einsum, and all a nearest-cell lookup needs).
+        posed = np.stack([c * fill[:, 0] - s * fill[:, 1] + x,
+                          s * fill[:, 0] + c * fill[:, 1] + y], axis=-1)  # fmt: skip
+        depth = swept.depth(posed, since[k:k + block, None])
+        excess = np.maximum(depth - params.free_space_tolerance, 0.0)
+        costs[k:k + block] = excess.sum(axis=1) / params.free_space_scale
     return costs
 
 
-def grid_candidates(points, sigma, shape, params: HypothesisParams) -> np.ndarray:
-    """The ``n_candidates`` poses of lowest contact cost on a grid (``grid_spacing``,
+def grid_candidates(points, sigma, shape, params: HypothesisParams, swept=None,
+                    point_steps=None, fill=None) -> np.ndarray:  # fmt: skip
+    """The ``n_candidates`` poses of lowest contact and free-space cost on a grid (``grid_spacing``,
     ``grid_yaw``) of every placement whose outline could reach a tracked point: the search
     that ICP's local fits on segments can miss (a segment holding clutter pulls them off)."""
     reach = outline_extent(shape) / 2.0
@@ -203,8 +245,11 @@ def grid_candidates(points, sigma, shape, params: HypothesisParams) -> np.ndarra
     if len(grid) == 0:
         return grid
     block = max(1, (1 << 21) // len(points))  # bounded memory: poses x points per block
-    costs = np.concatenate([contact_costs(grid[k:k + block], points, sigma, shape, params)[0]
-                            for k in range(0, len(grid), block)])  # fmt: skip
+    costs = np.empty(len(grid))
+    for k in range(0, len(grid), block):
+        contact, explained = contact_costs(grid[k:k + block], points, sigma, shape, params)
+        costs[k:k + block] = contact + free_space_costs(grid[k:k + block], explained, swept,
+                                                        point_steps, fill, params)  # fmt: skip
     keep = min(params.n_candidates, len(grid))
     return grid[np.argsort(costs, kind="stable")[:keep]]
 
@@ -294,6 +339,17 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     Raises:
         ValueError: naming the argument, e.g. no segment with ``min_explained`` points.
     """
+    found = search_hypotheses(rng, points, labels, shape, spread=spread, free_space=free_space,
+                              params=params)  # fmt: skip
+    return None if found is None else weigh_hypotheses(*found, shape, params)
+
+
+def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
+                      *, spread=None, free_space: FreeSpace | None = None,
+                      params: HypothesisParams = HypothesisParams()):  # fmt: skip
+    """The poses :func:`pose_hypotheses` weighs, with their costs and the points each explains
+    ((k, 3), (k,), (k, n)), before any is left out; None when no placement can touch
+    ``min_explained`` points. Arguments and errors as :func:`pose_hypotheses`'s."""
     points = as_finite_array(points, "points", (None, 3))
     labels = np.asarray(labels)
     if labels.shape != (len(points),) or not np.issubdtype(labels.dtype, np.integer):
@@ -310,43 +366,46 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     coarse = sample_outline(shape, params.fill_spacing)
     fill = sample_cross_section(shape, params.fill_spacing)
     height = float(points[:, 2].mean())
-    margin = 15.0 * params.temperature  # weights below e^-15 of the best's count as none
+    swept = swept_slice(free_space, height, params)
+    steps = None if free_space is None else np.asarray(free_space.point_steps)
 
     def scored(poses):
         poses = _distinct(poses, shape, coarse, params.fill_spacing)
         contact, explained = contact_costs(poses, points, sigma, shape, params)
-        # Free space only where it can matter: the best full cost is at most the cheapest
-        # contact pose's, and a pose whose contact cost alone exceeds that by the margin
-        # weighs nothing (cost inf).
-        costs = np.full(len(poses), np.inf)
-        first = np.argmin(contact)[None]
-        bound = contact[first] + free_space_costs(poses[first], explained[first], height,
-                                                  free_space, fill, params)  # fmt: skip
-        batch = np.flatnonzero(contact <= bound[0] + margin)
-        costs[batch] = contact[batch] + free_space_costs(
-            poses[batch], explained[batch], height, free_space, fill, params)
+        costs = contact + free_space_costs(poses, explained, swept, steps, fill, params)
         return poses, costs, explained
 
     fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
-    candidates = np.concatenate([*fits, grid_candidates(points, sigma, shape, params)])
+    candidates = np.concatenate([*fits, grid_candidates(points, sigma, shape, params, swept,
+                                                        steps, fill)])  # fmt: skip
     if len(candidates) == 0:
         return None
     poses, costs, _ = scored(candidates)
     best = poses[np.argsort(costs, kind="stable")[:params.n_polish]]
     poses, costs, explained = scored(np.concatenate(
         [poses, _polish(rng, best, points, sigma, shape, outline, params)]))
+    return poses, costs, explained
+
+
+def weigh_hypotheses(poses, costs, explained, shape: BoxSdf | CylinderSdf,
+                     params: HypothesisParams, motion_scales=None) -> PoseHypotheses:  # fmt: skip
+    """The :class:`PoseHypotheses` of scored poses ((k, 3), costs (k,), explained (k, n)):
+    those within ``15 temperature`` of the cheapest that explain ``min_explained`` points,
+    cheapest first, weighed, with the grasp chosen across them (``motion_scales`` (k,): each
+    pose's, kept alongside)."""
+    margin = 15.0 * params.temperature  # weights below e^-15 of the best's count as none
     # Hypotheses weighing under e^-15 of the best, or explaining too few points to pin a
     # pose, carry no information: left out.
     keep = (costs <= costs.min() + margin) & (explained.sum(axis=1) >= params.min_explained)
     keep |= costs == costs.min()
-    poses, costs, explained = poses[keep], costs[keep], explained[keep]
-    order = np.argsort(costs, kind="stable")
-    poses, costs, explained = poses[order], costs[order], explained[order]
+    order = np.flatnonzero(keep)[np.argsort(costs[keep], kind="stable")]
+    poses, costs, explained = poses[order].copy(), costs[order], explained[order]
     weights = np.exp(-(costs - costs[0]) / params.temperature)
     weights /= weights.sum()
     # One grasp is made: where it closes on the target under the most weight (the cheapest
     # among equals). Its probability of closing on the target is the confidence.
-    choice = choose_grasp(poses, weights, shape)
+    choice = choose_grasp(poses, weights, shape, margin=params.grasp_margin,
+                          angle_margin=params.grasp_angle_margin)  # fmt: skip
     chosen = _nearest(poses, choice.target_pose)
     confidence = choice.probability
     if explained[chosen].sum() < params.min_explained:
@@ -354,7 +413,8 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     poses[:, 2] = (poses[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
     target = choice.target_pose.copy()
     target[2] = (target[2] + np.pi) % (2.0 * np.pi) - np.pi
-    return PoseHypotheses(poses, costs, weights, explained, confidence, chosen, target)
+    scales = None if motion_scales is None else np.asarray(motion_scales)[order]
+    return PoseHypotheses(poses, costs, weights, explained, confidence, chosen, target, scales)
 
 
 def _nearest(poses, pose) -> int:

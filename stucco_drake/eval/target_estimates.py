@@ -14,13 +14,12 @@ import numpy as np
 
 from stucco_drake.core.grasp_choice import grasp_at, grasp_closes
 from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline, transform
+from stucco_drake.core.motion_scale import motion_scaled_hypotheses
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_hypotheses import (
     FreeSpace,
     HypothesisParams,
     PoseHypotheses,
-    pose_hypotheses,
-    tracker_spread,
 )
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.target_pose import NoSegmentToFit, TargetPoseEstimate, estimate_target_pose
@@ -63,17 +62,19 @@ def rules_estimate(rng, log: EpisodeLog, tracker, shape,
 
 def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: RobotPenetration,
                         params: HypothesisParams | None = None) -> PoseHypotheses | None:
-    """Weighted hypotheses from the tracker's MAP points with their spread over particles
-    (when the tracker has particles) and the free space of every logged config, or None when
-    no segment has enough points."""
+    """Weighted hypotheses over poses and motion scales from the contacts where sensed and
+    where the tracker's MAP particle has them
+    (:func:`~stucco_drake.core.motion_scale.motion_scaled_hypotheses`), with the free space of
+    every logged config (swept along the actions that sensed no contact), or None when no
+    segment has enough points."""
     params = params or HypothesisParams()
     points, labels = tracker.map_points(), np.asarray(tracker.segment())
     if np.bincount(labels[labels >= 0], minlength=1).max() < params.min_explained:
         return None
-    spread = tracker_spread(tracker)
-    free = FreeSpace(penetration, log.ee_position, log.ee_rotation[-1], point_steps(log))
-    return pose_hypotheses(rng, points, labels, shape, spread=spread, free_space=free,
-                           params=params)  # fmt: skip
+    free = FreeSpace(penetration, log.ee_position, log.ee_rotation[-1], point_steps(log),
+                     free_actions=np.diff(log.contact_offsets) == 0)
+    return motion_scaled_hypotheses(rng, log.contact_points, points, labels, shape,
+                                    free_space=free, params=params)  # fmt: skip
 
 
 def target_surface_distance(shape, points, pose) -> np.ndarray:

@@ -10,6 +10,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
+from stucco_drake.core.motion_scale import MOTION_SCALES, motion_scaled_hypotheses
 from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_hypotheses import FreeSpace, HypothesisParams, pose_hypotheses
@@ -36,6 +37,10 @@ class EstimatorState:
     # trackers' contact order.
     point_steps: np.ndarray = dataclasses.field(
         default_factory=lambda: np.zeros(0, dtype=np.int64))
+    # (n, 3) each tracked point where it was sensed (m, world), in the same order.
+    sensed_points: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    # (k,) whether each action of config_positions sensed no contact (its path is free space).
+    free_actions: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=bool))
     last_action_index: int = -1
     estimate: TargetPoseEstimate | None = None
 
@@ -46,7 +51,9 @@ class EstimatorState:
         """A copy owning its own generator and arrays, safe to update."""
         return dataclasses.replace(
             self, rng=copy.deepcopy(self.rng), config_positions=self.config_positions.copy(),
-            point_steps=self.point_steps.copy(), estimate=copy.deepcopy(self.estimate))
+            point_steps=self.point_steps.copy(), sensed_points=self.sensed_points.copy(),
+            free_actions=self.free_actions.copy(),
+            estimate=copy.deepcopy(self.estimate))
 
 
 class TargetPoseEstimator(LeafSystem):
@@ -66,18 +73,18 @@ class TargetPoseEstimator(LeafSystem):
         map_points: (n, 3) numpy array of tracked points (m, world).
         segment_labels: (n,) numpy int array.
         point_spread: (n,) numpy array, each point's spread over the tracker's particles (m;
-            the SoftTrackingFilter's ``point_spread``); optional, none when unconnected.
+            the SoftTrackingFilter's ``point_spread``); optional, none when unconnected; used
+            only with ``motion_scales=None``.
 
     Output ports:
         target_pose: RigidTransform X_WO of the estimated target frame (yaw about world z, at
             the mean contact height); identity until a first estimate exists.
         estimate: the full :class:`TargetPoseEstimate` (None until a first estimate exists),
             with the per-segment report.
-        pose_hypotheses: weighted hypotheses of the target's pose from the tracked points,
-            their spread, the free space of the configs visited and the target's outline
-            (:func:`~stucco_drake.core.pose_hypotheses.pose_hypotheses`, a generator seeded by
-            ``[seed, action index]``); None while no segment has enough points. Computed only
-            when evaluated.
+        pose_hypotheses: weighted hypotheses of the target's pose from the points (where sensed
+            and where tracked, see ``motion_scales``), the free space of the configs visited
+            and the target's outline (a generator seeded by ``[seed, action index]``); None
+            while no segment has enough points. Computed only when evaluated.
         target_confidence: 1-vector, the hypotheses' confidence (0 to 1): the posterior
             probability that a grasp at their chosen pose closes on the target; 0 without
             hypotheses.
@@ -97,6 +104,10 @@ class TargetPoseEstimator(LeafSystem):
             at which the chosen segment was touched (default 1 cm: how far the target may
             have moved since); None leaves them out.
         hypothesis_params: settings of the pose hypotheses (default: HypothesisParams()).
+        motion_scales: the motion scales the hypotheses search over, each point between
+            where it was sensed and where it is tracked
+            (:func:`~stucco_drake.core.motion_scale.motion_scaled_hypotheses`); None: the
+            tracked points alone, each weighed by its ``point_spread``.
     """
 
     def __init__(
@@ -109,6 +120,7 @@ class TargetPoseEstimator(LeafSystem):
         penetration_configs: str | int = "since_touch",
         touch_tolerance: float | None = TOUCH_TOLERANCE,
         hypothesis_params: HypothesisParams | None = None,
+        motion_scales=MOTION_SCALES,
     ):
         super().__init__()
         if not check_period > 0:
@@ -121,6 +133,7 @@ class TargetPoseEstimator(LeafSystem):
         self.penetration_configs = penetration_configs
         self.touch_tolerance = touch_tolerance
         self.hypothesis_params = hypothesis_params or HypothesisParams()
+        self.motion_scales = None if motion_scales is None else tuple(motion_scales)
         self._seed = int(seed)
         self._ee_pose = self.DeclareAbstractInputPort(
             "ee_pose", AbstractValue.Make(RigidTransform())
@@ -171,6 +184,9 @@ class TargetPoseEstimator(LeafSystem):
         position = self._ee_pose.Eval(context).translation()
         updated.config_positions = np.vstack([current.config_positions, position])
         step = len(updated.config_positions) - 1
+        updated.free_actions = np.append(current.free_actions, len(contacts.points) == 0)
+        updated.sensed_points = np.vstack([current.sensed_points,
+                                           np.asarray(contacts.points, float).reshape(-1, 3)])
         updated.point_steps = np.concatenate(
             [current.point_steps, np.full(len(contacts.points), step, dtype=np.int64)])
         points = self._points.Eval(context)
@@ -222,12 +238,19 @@ class TargetPoseEstimator(LeafSystem):
             return
         spread = self._spread.Eval(context) if self._spread.HasValue(context) else None
         free = FreeSpace(self.penetration, state.config_positions,
-                         self._ee_pose.Eval(context).rotation().matrix(), state.point_steps[:n])
+                         self._ee_pose.Eval(context).rotation().matrix(), state.point_steps[:n],
+                         free_actions=state.free_actions)
         rng = np.random.default_rng([self._seed, max(state.last_action_index, 0)])
-        output.set_value(pose_hypotheses(
-            rng, points[:n], labels[:n], self.target_shape,
-            spread=None if spread is None else spread[:n], free_space=free,
-            params=self.hypothesis_params))  # fmt: skip
+        if self.motion_scales is None:
+            output.set_value(pose_hypotheses(
+                rng, points[:n], labels[:n], self.target_shape,
+                spread=None if spread is None else spread[:n], free_space=free,
+                params=self.hypothesis_params))  # fmt: skip
+            return
+        output.set_value(motion_scaled_hypotheses(
+            rng, state.sensed_points[:n], points[:n], labels[:n], self.target_shape,
+            free_space=free, params=self.hypothesis_params,
+            scales=self.motion_scales))  # fmt: skip
 
     def calc_pose_hypotheses(self, context, output):
         output.set_value(self._hypotheses.Eval(context))

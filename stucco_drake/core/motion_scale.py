@@ -1,0 +1,81 @@
+"""Target-pose hypotheses when how far the target moved is itself in doubt.
+
+The tracker moves each contact point by its model of the touched object's motion: the
+end-effector's displacement while in contact, clipped to a friction cone. Where the object
+really moved with the gripper (a light can pushed along) that is what makes the points usable;
+where it did not (a heavy box the gripper slid along, a soft bubble squeezed against it), it
+carries the points into the object by as much as the gripper travelled. A blind robot cannot
+tell which from the points alone, so each hypothesis also chooses a **motion scale**
+``alpha``: the target's points lie at ``sensed + alpha (tracked - sensed)``, one ``alpha`` for
+all of them (the object moved rigidly, by that fraction of what the tracker says; 0: it never
+moved, 1: as tracked). Poses are searched at each scale of a fixed set
+(:func:`~stucco_drake.core.pose_hypotheses.search_hypotheses`, with the sensor's noise alone:
+a point's spread over particles belongs to its tracked place) and pooled under a uniform prior
+over the scales, so the scale is weighed like any other unknown of a hypothesis.
+Units: m, rad; world frame W.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stucco_drake.core.pose_hypotheses import (
+    FreeSpace,
+    HypothesisParams,
+    PoseHypotheses,
+    search_hypotheses,
+    weigh_hypotheses,
+)
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.core.validation import as_finite_array
+
+#: Motion scales searched: from "never moved" to "moved as tracked", in quarters.
+MOTION_SCALES = (0.0, 0.25, 0.5, 0.75, 1.0)
+
+
+def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
+                             shape: BoxSdf | CylinderSdf, *,
+                             free_space: FreeSpace | None = None,
+                             params: HypothesisParams | None = None,
+                             scales=MOTION_SCALES) -> PoseHypotheses | None:  # fmt: skip
+    """Weighted target-pose hypotheses over poses and motion scales (see the module).
+
+    Args:
+        rng: caller-seeded generator for the ICP starts (drawn from scale by scale, in order).
+        sensed: (n, 3) each contact point where it was sensed (m, W).
+        tracked: (n, 3) the same points where the tracker has them now, e.g. its MAP particle's.
+        labels: (n,) the tracker's segment labels (negative: noise).
+        shape: the target's known geometry in its frame O.
+        free_space: where the robot has been (None: contact evidence only).
+        params: the search's settings (None: ``HypothesisParams()``).
+        scales: the motion scales searched (each in [0, 1]).
+
+    Returns:
+        The pooled hypotheses with each one's ``motion_scales``, or None when no placement of
+        the target can touch ``min_explained`` points at any scale.
+
+    Raises:
+        ValueError: naming the argument (points of different shapes, a scale outside [0, 1],
+            no segment with ``min_explained`` points).
+    """
+    params = params or HypothesisParams()
+    sensed = as_finite_array(sensed, "sensed", (None, 3))
+    tracked = as_finite_array(tracked, "tracked", sensed.shape)
+    scales = np.asarray(scales, dtype=np.float64).reshape(-1)
+    if len(scales) == 0 or np.any((scales < 0.0) | (scales > 1.0)):
+        raise ValueError(f"scales: expected motion scales in [0, 1], got {scales.tolist()}")
+    found = []
+    for scale in scales:
+        points = sensed + scale * (tracked - sensed)
+        result = search_hypotheses(rng, points, labels, shape, free_space=free_space,
+                                   params=params)  # fmt: skip
+        if result is not None:
+            found.append((*result, np.full(len(result[0]), scale)))
+    if not found:
+        return None
+    poses, costs, explained, scale_of = (np.concatenate(part) for part in zip(*found,
+                                                                            strict=True))
+    return weigh_hypotheses(poses, costs, explained, shape, params, scale_of)
+
+
+__all__ = ["MOTION_SCALES", "motion_scaled_hypotheses"]
