@@ -295,6 +295,27 @@ def test_small_table_writes_layout_and_figure_and_resumes(tmp_path):
     assert again == rows and (tmp_path / "logs" / "SYNC_1.npz").stat().st_mtime_ns == stamp
 
 
+def test_layouts_of_one_family_share_a_column_group(tmp_path):
+    """Two scenes whose sources name one family (as a base scene's randomized layouts do) are
+    tabled as one column group: its CE is the mean over both scenes' runs in runs.csv."""
+    from stucco_drake.eval.results import RunResults
+    from stucco_drake.eval.sources import EpisodeSource
+    from stucco_drake.eval.synthetic_episode import synthetic_episode
+
+    sources = {name: EpisodeSource(synthetic_episode, family="SYN") for name in ("SYN2", "SYNC")}
+    with cf.ThreadPoolExecutor(1) as executor:
+        make_table(["SYN2", "SYNC"], ["dbscan"], 1, tmp_path, executor, progress=False,
+                   sources=sources)  # fmt: skip
+    table = (tmp_path / "table.md").read_text().splitlines()
+    assert [c.strip() for c in table[0].strip("|").split("|")] == [
+        "method", "SYN GS %", "SYN FMI", "SYN CE cm"]
+    ce = [row["ce_cm"] for row in RunResults(tmp_path / "runs.csv").rows()]
+    assert len(ce) == 2
+    cell = table[2].strip("|").split("|")[3].strip().strip("*")
+    assert float(cell.split()[0]) == pytest.approx(np.mean(ce), abs=0.005)  # two decimals
+    assert "SYN: 2 runs per method" in table
+
+
 def test_a_table_folder_refuses_rows_of_another_setting(tmp_path):
     from stucco_drake.core.params import SoftTrackingParams
 

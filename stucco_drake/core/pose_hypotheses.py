@@ -220,10 +220,12 @@ def free_space_costs(poses, explained, swept: SweptSlice | None, point_steps, fi
 
 
 def grid_candidates(points, sigma, shape, params: HypothesisParams, swept=None,
-                    point_steps=None, fill=None) -> np.ndarray:  # fmt: skip
-    """The ``n_candidates`` poses of lowest contact and free-space cost on a grid (``grid_spacing``,
-    ``grid_yaw``) of every placement whose outline could reach a tracked point: the search
-    that ICP's local fits on segments can miss (a segment holding clutter pulls them off)."""
+                    point_steps=None, fill=None, fill_weight: float = 1.0) -> np.ndarray:  # fmt: skip
+    """The ``n_candidates`` poses of lowest contact and free-space cost on a grid
+    (``grid_spacing``, ``grid_yaw``) of every placement whose outline could reach a tracked
+    point: the search that ICP's local fits on segments can miss (a segment holding clutter
+    pulls them off). Free space (None: none) is judged on the cross-section points ``fill``,
+    its cost times ``fill_weight``."""
     reach = outline_extent(shape) / 2.0
     lower, upper = points[:, :2].min(axis=0) - reach, points[:, :2].max(axis=0) + reach
     axes = [np.arange(lo, hi + 1e-12, params.grid_spacing)
@@ -248,8 +250,8 @@ def grid_candidates(points, sigma, shape, params: HypothesisParams, swept=None,
     costs = np.empty(len(grid))
     for k in range(0, len(grid), block):
         contact, explained = contact_costs(grid[k:k + block], points, sigma, shape, params)
-        costs[k:k + block] = contact + free_space_costs(grid[k:k + block], explained, swept,
-                                                        point_steps, fill, params)  # fmt: skip
+        costs[k:k + block] = contact + fill_weight * free_space_costs(
+            grid[k:k + block], explained, swept, point_steps, fill, params)
     keep = min(params.n_candidates, len(grid))
     return grid[np.argsort(costs, kind="stable")[:keep]]
 
@@ -376,8 +378,12 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
         return poses, costs, explained
 
     fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
-    candidates = np.concatenate([*fits, grid_candidates(points, sigma, shape, params, swept,
-                                                        steps, fill)])  # fmt: skip
+    # The grid only ranks placements 1 cm apart: its free space is judged on a fill twice as
+    # sparse, each point counting for the points it stands for.
+    sparse = sample_cross_section(shape, 2.0 * params.fill_spacing)
+    grid = grid_candidates(points, sigma, shape, params, swept, steps, sparse,
+                           len(fill) / len(sparse))  # fmt: skip
+    candidates = np.concatenate([*fits, grid])
     if len(candidates) == 0:
         return None
     poses, costs, _ = scored(candidates)

@@ -207,7 +207,9 @@ def make_table(
     ``stucco_params`` STUCCO's parameters (None: Table I) and ``filter_stream`` which draws
     the trackers take (0: seeded with the episode's seed, as the paper's tables; K: another
     stream of draws on the same episodes, see :data:`STREAM_STRIDE`); ``target_estimator``
-    where the grasps are made (see :func:`replay_cached`). Rows are keyed by
+    where the grasps are made (see :func:`replay_cached`). Scenes whose sources share a
+    ``family`` (the randomized layouts of one base scene) are tabled as one column group, their
+    runs pooled. Rows are keyed by
     scene, seed and method only, so an OUT folder holds one of each: :func:`check_table_config`
     refuses another setting in a folder that holds one. Returns the table's rows (from
     ``OUT/runs.csv``, including runs of earlier calls).
@@ -230,10 +232,15 @@ def make_table(
     wanted = {(scene, seed, method) for seed in range(runs) for scene in scenes
               for method in methods}  # fmt: skip
 
+    # A family's layouts (randomized from one base scene) share one column group.
+    family = {scene: sources[scene].family or scene for scene in scenes}
+    columns = list(dict.fromkeys(family[scene] for scene in scenes))
+
     def tabulate() -> list[dict]:
         rows = [row for row in results.rows() if row_key(row) in wanted]
-        write_table(rows, scenes, methods, out / "table.md")
-        plot_fmi_ce(rows, out / "fmi_ce.png", scenes, methods)
+        grouped = [{**row, "scene": family[row["scene"]]} for row in rows]
+        write_table(grouped, columns, methods, out / "table.md")
+        plot_fmi_ce(grouped, out / "fmi_ce.png", columns, methods)
         return rows
 
     # Seed by seed: simulate that seed's episodes of every scene, replay them and rewrite the

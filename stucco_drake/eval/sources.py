@@ -28,12 +28,15 @@ class EpisodeSource:
         grasp: ``grasp(log, tracker) -> bool`` run after replay (None: no grasp, the row's
             grasp success stays empty).
         scene_set: the evaluation set the scene belongs to (see :mod:`stucco_drake.eval.sets`).
+        family: the column group of the scene in a table: a randomized layout's base scene
+            (its layouts are tabled together); empty: the scene's own name.
     """
 
     produce: Callable[[str, int], EpisodeLog]
     penetration: Callable[[EpisodeLog], RobotPenetration] | None = None
     grasp: GraspCheck | None = None
     scene_set: str = "other"
+    family: str = ""
 
     def penetration_for(self, log: EpisodeLog, method: str) -> RobotPenetration | None:
         """The pxpen ``method`` needs on ``log``: STUCCO's from ``penetration``; None for the
