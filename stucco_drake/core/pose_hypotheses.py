@@ -220,7 +220,8 @@ def free_space_costs(poses, explained, swept: SweptSlice | None, point_steps, fi
 
 
 def grid_candidates(points, sigma, shape, params: HypothesisParams, swept=None,
-                    point_steps=None, fill=None, fill_weight: float = 1.0) -> np.ndarray:  # fmt: skip
+                    point_steps=None, fill=None,
+                    fill_weight: float = 1.0) -> np.ndarray:  # fmt: skip
     """The ``n_candidates`` poses of lowest contact and free-space cost on a grid
     (``grid_spacing``, ``grid_yaw``) of every placement whose outline could reach a tracked
     point: the search that ICP's local fits on segments can miss (a segment holding clutter
