@@ -86,8 +86,14 @@ class SecondRobotResult:
         precision, recall: detection over the contact and free actions (NaN when undefined).
         isolation_errors: (n_points,) m, each tracked point's distance to its true contact.
         step_isolation_errors: (n_steps,) m, per step (isolated point and true contact).
+        received: (n_points, 3) the points as the tracker received them (m, world).
         points, labels, truth_names: the tracked points (m, world), their segments and the
             boxes they truly belong to ("" when none was touched then).
+        carried_truth: (n_points, 3) where each tracked point should be now (m, world): its
+            true contact point, fixed in the box it touched, at that box's final pose (NaN
+            for a point without a true contact). A tracker that follows the boxes puts its
+            points there; one that leaves a point behind as its box is pushed does not, even
+            when the point still lies on the box's surface (which CE alone cannot tell).
         ce: contact error (m); fmi: Fowlkes-Mallows index; wall: seconds.
         steps: the per-step logs (name -> (n_steps, k) array): ``truth``
             (:class:`RobotContactTruth`'s vector), ``action``, ``in_contact``,
@@ -101,13 +107,19 @@ class SecondRobotResult:
     recall: float
     isolation_errors: np.ndarray
     step_isolation_errors: np.ndarray
+    received: np.ndarray
     points: np.ndarray
     labels: np.ndarray
     truth_names: np.ndarray
+    carried_truth: np.ndarray
     ce: float
     fmi: float
     wall: float
     steps: dict
+
+    def tracking_errors(self) -> np.ndarray:
+        """(n_points,) m: each tracked point's distance to its carried true contact."""
+        return np.linalg.norm(self.points - self.carried_truth, axis=1)
 
     def line(self) -> str:
         """The one-line summary the example prints."""
@@ -118,7 +130,9 @@ class SecondRobotResult:
                 f"free, {g} grazing actions), "
                 f"isolation median {100 * np.median(self.isolation_errors):.2f} cm "
                 f"(per step {100 * np.median(self.step_isolation_errors):.2f} cm), "
-                f"tracking CE {100 * self.ce:.2f} cm, FMI {self.fmi:.3f}, "
+                f"tracking CE {100 * self.ce:.2f} cm, FMI {self.fmi:.3f}, points "
+                f"{100 * np.nanmedian(self.tracking_errors()):.2f} cm from their carried "
+                f"contacts (median), "
                 f"{len(self.points)} points, wall {self.wall:.1f} s")  # fmt: skip
 
 
@@ -168,6 +182,7 @@ def _build(station, stats, seed: int, tracker_params, dx_model: str):
         ("in_contact", chain.detector.GetOutputPort("in_contact")),
         ("has_contact", chain.isolator.GetOutputPort("has_contact")),
         ("point", chain.isolator.GetOutputPort("contact_point")),
+        ("plant_state", sub.GetOutputPort("plant_state")),
     )}  # fmt: skip
     return builder.Build(), chain, logs
 
@@ -189,28 +204,30 @@ def run_second_robot(seed: int = 0, scene: ProbeScene | None = None, stats=None,
     diagram, _, logs = _build(station, stats, seed, tracker_params, dx_model)
     simulator = make_station_simulator(diagram, h)
     context = simulator.get_context()
-    pairs = []
+    pairs = []  # (point, its TruthContact, its action), in the order the tracker got them
     for k in range(len(scene.actions)):
         simulator.AdvanceTo((k + 1) * scene.action_duration + _PIPELINE_STEPS * h)
         contacts = diagram.GetOutputPort("action_contacts").Eval(context)
         truth = diagram.GetOutputPort("action_truth").Eval(context)
-        pairs.extend(zip(contacts.points, truth, strict=True))
+        pairs.extend((p, t, k) for p, t in zip(contacts.points, truth, strict=True))
     points = np.asarray(diagram.GetOutputPort("map_points").Eval(context)).reshape(-1, 3)
     labels = np.asarray(diagram.GetOutputPort("segment_labels").Eval(context))
     data = {name: log.FindLog(context).data().T for name, log in logs.items()}
     truth_actions, grazes, detected = _per_action(data, len(scene.actions))
     scored = detected & ~grazes
     tp = int(np.sum(truth_actions & scored))
-    names = np.array([t.name for _, t in pairs], dtype=object).astype(str)
-    errors = np.array([np.linalg.norm(p - t.point) for p, t in pairs])
+    names = np.array([t.name for _, t, _ in pairs], dtype=object).astype(str)
+    errors = np.array([np.linalg.norm(p - t.point) for p, t, _ in pairs])
     plant_context = station.plant.GetMyContextFromRoot(context)
+    carried = _carried_truth(station, data, pairs, plant_context)
     ce = contact_error(points, _box_surfaces(station, plant_context)) if len(points) else np.nan
     known = names != ""
     fmi = fowlkes_mallows(names[known], labels[known]) if known.sum() >= 2 else np.nan
     return SecondRobotResult(
         truth_actions, detected, grazes, _ratio(tp, int(scored.sum())),
-        _ratio(tp, int(truth_actions.sum())), errors, _step_errors(data), points, labels,
-        names, float(ce), float(fmi), time.perf_counter() - start, data,
+        _ratio(tp, int(truth_actions.sum())), errors, _step_errors(data),
+        np.array([p for p, _, _ in pairs]).reshape(-1, 3), points, labels,
+        names, carried, float(ce), float(fmi), time.perf_counter() - start, data,
     )  # fmt: skip
 
 
@@ -224,6 +241,27 @@ def _per_action(data: dict, n_actions: int) -> tuple[np.ndarray, np.ndarray, np.
     free = np.array([not np.any(force[s] >= GRAZE_FORCE) for s in steps])
     detected = np.array([np.any(flagged[s]) for s in steps])
     return truth, ~truth & ~free, detected
+
+
+def _carried_truth(station, data: dict, pairs, final_context) -> np.ndarray:
+    """Each tracked point's true contact carried with its box to the box's final pose (see
+    ``SecondRobotResult.carried_truth``). The box's pose at the contact is read from the
+    logged plant state at the last step of the point's action that had an isolated point
+    (the step the assembler latched it from)."""
+    plant = station.plant
+    scratch = plant.CreateDefaultContext()
+    action = np.round(data["action"][:, 0]).astype(int)
+    isolated = data["has_contact"][:, 0] > 0.5
+    out = np.full((len(pairs), 3), np.nan)
+    for i, (_, truth, k) in enumerate(pairs):
+        steps = np.flatnonzero((action == k) & isolated)
+        if truth.name == "" or not len(steps):
+            continue
+        plant.SetPositionsAndVelocities(scratch, data["plant_state"][steps[-1]])
+        body = station.objects[truth.name]
+        X_then, X_now = body.EvalPoseInWorld(scratch), body.EvalPoseInWorld(final_context)
+        out[i] = X_now.multiply(X_then.inverse().multiply(truth.point))
+    return out
 
 
 def _step_errors(data: dict) -> np.ndarray:
