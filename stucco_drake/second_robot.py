@@ -18,7 +18,13 @@ plant's own contact results:
   isolated point and a true contact of at least ``CONTACT_FORCE``.
 - tracking: the tracked points' contact error (mean distance to the nearest box surface at
   the boxes' final poses, :func:`~stucco_drake.core.metrics.contact_error`) and the
-  Fowlkes-Mallows index of their segments against the boxes they truly belong to.
+  Fowlkes-Mallows index of their segments against the boxes they truly belong to; and each
+  tracked point's distance to its *carried* true contact (the contact point fixed in the box
+  it touched, at the box's final pose), which also sees a point left behind on a face that
+  slid under it.
+
+Per-step truth is logged here (a :class:`RobotContactTruth` every step) because detection is
+scored per step of each action; the BOR Diagram asks for truth once per action only.
 
 Units: m, N, s (CE reported in cm).
 """
@@ -97,7 +103,7 @@ class SecondRobotResult:
         ce: contact error (m); fmi: Fowlkes-Mallows index; wall: seconds.
         steps: the per-step logs (name -> (n_steps, k) array): ``truth``
             (:class:`RobotContactTruth`'s vector), ``action``, ``in_contact``,
-            ``has_contact``, ``point`` (the isolator's).
+            ``has_contact``, ``point`` (the isolator's), ``plant_state``.
     """
 
     truth_actions: np.ndarray

@@ -181,3 +181,12 @@ def test_tracked_points_follow_the_pushed_boxes(run):
     # Median over all points: one sample spacing (measured 0.09-0.27 cm over seeds 0-3; in
     # seed 0 box_a's +y-face point is dragged 3 cm along +x by box_b's push 0.16 m away).
     assert np.median(errors) <= SPACING
+
+
+def test_the_example_line_reports_these_figures(run):
+    # examples/second_robot.py prints exactly this line for seed 0.
+    line = run.line()
+    assert line.startswith("second robot (SCARA probe, 3 boxes): detection precision 1.00 "
+                           "recall 1.00 (7 contact, ")  # fmt: skip
+    assert f"tracking CE {100 * run.ce:.2f} cm, FMI 1.000" in line
+    assert f"isolation median {100 * np.median(run.isolation_errors):.2f} cm" in line

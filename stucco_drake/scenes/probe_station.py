@@ -100,7 +100,8 @@ class ProbeScene:
         start_xy: where the probe's centre starts (m, world); yaw: its held yaw (rad).
         nominal_q: seed of the start IK (rad; elbow bent, away from the straight arm).
         action_duration: seconds per action; time_step: the plant's (s).
-        control: joint gains and planar control (the iiwa scenes' defaults, no push cap).
+        control: joint gains and planar control (the iiwa scenes' defaults, no push cap;
+            its ``nominal_q`` is the iiwa's and unused here).
     """
 
     boxes: tuple = PUSH_BOXES
