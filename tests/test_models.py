@@ -168,6 +168,7 @@ def test_model_list_is_complete():
     expected = {
         "iiwa14/iiwa14.urdf",
         "bubble_gripper/bubble_gripper.sdf",
+        "scara_probe/scara_probe.urdf",
         "table.sdf",
         "wall.sdf",
     } | {f"ycb/{stem}.sdf" for stem in YCB_EXPECTED}

@@ -23,7 +23,6 @@ import dataclasses
 import numpy as np
 from pydrake.geometry import Box, Cylinder
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from stucco_drake.bor.grasp import build_grasp_scene
@@ -37,8 +36,6 @@ from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
 from stucco_drake.systems.action_contacts_assembler import (
     ActionContactsAssembler,
-    TruthContact,
-    nearest_truth,
 )
 from stucco_drake.systems.bubble_contact_sensor import BubbleContactSensor
 from stucco_drake.systems.contact_detector import (
@@ -47,6 +44,7 @@ from stucco_drake.systems.contact_detector import (
 )
 from stucco_drake.systems.contact_isolator import ContactIsolator
 from stucco_drake.systems.contact_tracking_visualizer import ContactTrackingVisualizer
+from stucco_drake.systems.contact_truth import RobotObjectContacts as PlantContacts
 from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.planar_controller import ActionClock
 from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
@@ -159,63 +157,19 @@ def object_surfaces(built: BuiltScene, plant_context) -> dict[str, list[PosedSur
 
 
 # ------------------------------------------------------------------ ground truth for scoring
-class RobotObjectContacts:
+class RobotObjectContacts(PlantContacts):
     """Ground truth for evaluation: the robot's contacts with objects, from contact results.
 
-    A :class:`~stucco_drake.systems.action_contacts_assembler.TruthLabeller` over the full
-    plant state: :meth:`contacts` puts a state into a scratch context of the scene's Diagram and
-    reads the plant's own contact results there, one :class:`TruthContact` per contact between
-    a robot body (arm or gripper) and an object body (m, world; a hydroelastic surface's
-    centroid or a point contact's point), the object named as in
-    ``BuiltScene.free_bodies``/``welded_bodies``. Where the contacts are depends on the
-    configuration alone, so the scratch context gives the same contacts as the simulation's
-    own at that state; the assembler asks once per completed action, not every step.
+    :class:`~stucco_drake.systems.contact_truth.RobotObjectContacts` for a built scene: the
+    robot is the arm and the gripper, the objects are ``BuiltScene.free_bodies`` and
+    ``welded_bodies`` (named as there); the scratch context is the scene Diagram's.
     """
 
     def __init__(self, built: BuiltScene):
         plant = built.plant
-        names = {b.index(): n for n, b in {**built.free_bodies, **built.welded_bodies}.items()}
-        robot = {plant.GetModelInstanceByName(n) for n in (IIWA, GRIPPER)}
-        self._robot_geometry, self._object_geometry = set(), {}
-        for i in range(plant.num_bodies()):
-            body = plant.get_body(BodyIndex(i))
-            for gid in plant.GetCollisionGeometriesForBody(body):
-                if body.model_instance() in robot:
-                    self._robot_geometry.add(gid)
-                elif body.index() in names:
-                    self._object_geometry[gid] = names[body.index()]
-        self._plant = plant
-        self._context = built.diagram.CreateDefaultContext()
-        self._plant_context = plant.GetMyMutableContextFromRoot(self._context)
-        self.state_size = plant.num_multibody_states()
-
-    def _pair(self, a, b) -> str | None:
-        if a in self._robot_geometry:
-            return self._object_geometry.get(b)
-        if b in self._robot_geometry:
-            return self._object_geometry.get(a)
-        return None
-
-    def contacts(self, plant_state) -> list[TruthContact]:
-        """The robot-object contacts at ``plant_state`` (the plant's [q; v])."""
-        self._plant.SetPositionsAndVelocities(self._plant_context, plant_state)
-        results = self._plant.get_contact_results_output_port().Eval(self._plant_context)
-        found = []
-        for i in range(results.num_hydroelastic_contacts()):
-            surface = results.hydroelastic_contact_info(i).contact_surface()
-            name = self._pair(surface.id_M(), surface.id_N())
-            if name is not None:
-                found.append(TruthContact(name, np.array(surface.centroid())))
-        for i in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(i)
-            name = self._pair(info.point_pair().id_A, info.point_pair().id_B)
-            if name is not None:
-                found.append(TruthContact(name, np.array(info.contact_point())))
-        return found
-
-    def label(self, points, plant_state) -> tuple:
-        """The true contact nearest each of ``points`` (n, 3) at ``plant_state``."""
-        return nearest_truth(np.asarray(points, dtype=float), self.contacts(plant_state))
+        robot = [plant.GetModelInstanceByName(n) for n in (IIWA, GRIPPER)]
+        super().__init__(plant, built.diagram, robot, {**built.free_bodies,
+                                                       **built.welded_bodies})  # fmt: skip
 
 
 # --------------------------------------------------------------------------------- building

@@ -17,7 +17,7 @@ from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.sdf import GridSdf
 from stucco_drake.core.segmentation import connected_components
-from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf, SphereSdf
 from stucco_drake.core.soft_tracker import SoftTracker
 from stucco_drake.core.target_pose import estimate_target_pose
 from stucco_drake.core.tracker import Tracker
@@ -31,6 +31,7 @@ __all__ = [
     "RobotPenetration",
     "SoftTracker",
     "SoftTrackingParams",
+    "SphereSdf",
     "Tracker",
     "TranslationDynamics",
     "ambiguity",

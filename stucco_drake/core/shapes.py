@@ -3,7 +3,8 @@
 Each is a callable ``sdf(points[..., 3]) -> distance[...]`` (metres, negative inside) with
 ``bounds(level)``, an axis-aligned box that contains every point whose distance is below
 ``level``. They describe synthetic robots and objects in tests and the built-in demo scene, and
-are the ground truth that :class:`~stucco_drake.core.sdf.GridSdf` is checked against.
+are the ground truth that :class:`~stucco_drake.core.sdf.GridSdf` is checked against (and the
+second robot's spherical probe, :mod:`stucco_drake.robot.scara_probe`).
 """
 
 from __future__ import annotations
@@ -49,4 +50,20 @@ class CylinderSdf:
 
     def bounds(self, level: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         half = np.array([self.radius, self.radius, self.half_height]) + level
+        return np.asarray(self.center) - half, np.asarray(self.center) + half
+
+
+@dataclasses.dataclass(frozen=True)
+class SphereSdf:
+    """Sphere of ``radius`` centred at ``center`` (metres): exact distance |p - c| - r."""
+
+    radius: float
+    center: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __call__(self, points) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64) - self.center
+        return np.linalg.norm(p, axis=-1) - self.radius
+
+    def bounds(self, level: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        half = np.full(3, self.radius + level)
         return np.asarray(self.center) - half, np.asarray(self.center) + half

@@ -41,7 +41,8 @@ class ArmKinematics:
     It owns a scratch context of that plant, so one instance must not serve two simulations
     running in parallel threads. Positions are in the plant's ordering (rad, m); poses and
     Jacobians are of the gripper frame in the world frame, the Jacobian restricted to the arm's
-    7 joints (rows: angular then linear velocity).
+    n single-dof joints (rows: angular then linear velocity; n = 7 for our iiwa, 3 for the
+    SCARA probe arm, whose 6 x 3 Jacobian spans exactly the planar motions).
     """
 
     def __init__(self, plant, arm_instance, gripper_frame):
@@ -65,7 +66,7 @@ class ArmKinematics:
         return self.frame.CalcPoseInWorld(self.context)
 
     def jacobian(self) -> np.ndarray:
-        """6 x 7 spatial-velocity Jacobian of the gripper frame's origin, in the world frame."""
+        """6 x n spatial-velocity Jacobian of the gripper frame's origin, in the world frame."""
         world = self.plant.world_frame()
         J = self.plant.CalcJacobianSpatialVelocity(
             self.context, JacobianWrtVariable.kV, self.frame, np.zeros(3), world, world
@@ -131,8 +132,8 @@ class PlanarEndEffectorController(LeafSystem):
             every other robot joint (the fingers) is held at ``hold_positions``.
         planar_goal: (x, y) the current action moves the gripper frame to (m, world frame).
 
-    Discrete state: [q_cmd (7), v_cmd (7), start_xy (2), goal_xy (2), tick (1)], updated every
-    ``period`` seconds. An action lasts ``ticks_per_action`` updates.
+    Discrete state: [q_cmd (n), v_cmd (n), start_xy (2), goal_xy (2), tick (1)] for the arm's
+    n joints, updated every ``period`` seconds. An action lasts ``ticks_per_action`` updates.
 
     ``max_push_force`` (N, None for no limit) caps how hard the gripper pushes in x-y, as the
     paper's floating gripper was moved by a constraint of at most 30 N: whenever the joint
