@@ -22,7 +22,7 @@ import dataclasses
 
 import numpy as np
 
-from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.penetration import RobotPenetration, deep_box_corners
 
 #: Raster cells (configs x footprint) evaluated per block: bounds scratch memory.
 _CELL_BUDGET = 1 << 20
@@ -135,13 +135,9 @@ class SweptSlice:
 def _footprint_reach(penetration: RobotPenetration, rotation):
     """How far (m) the robot's inside reaches from the end-effector origin along world -x, -y
     and +x, +y ((2,) each), from the grid nodes inside it; None when none is inside."""
-    grid = penetration.robot_sdf
-    inside = np.argwhere(grid.values < 0.0)
-    if len(inside) == 0:
+    corners = deep_box_corners(penetration.robot_sdf)
+    if corners is None:
         return None
-    lower = grid.lower + (inside.min(axis=0) - 1) * grid.resolution
-    upper = grid.lower + (inside.max(axis=0) + 1) * grid.resolution
-    corners = np.stack(np.meshgrid(*zip(lower, upper, strict=True)), -1).reshape(-1, 3)
     if rotation is not None:
         corners = corners @ np.asarray(rotation, dtype=np.float64).T  # into world axes
     return -corners[:, :2].min(axis=0), corners[:, :2].max(axis=0)

@@ -66,6 +66,18 @@ def _check_encloses_robot(grid: GridSdf) -> None:
         )
 
 
+def deep_box_corners(grid: GridSdf, depth: float = 0.0) -> np.ndarray | None:
+    """(8, 3) corners (m, the grid's frame) of the box of grid nodes deeper than ``depth`` (m)
+    inside the robot, grown by one cell (a lookup interpolates those nodes: no point outside
+    it is deeper); None when no node is that deep."""
+    deep = np.argwhere(grid.values < -depth)
+    if len(deep) == 0:
+        return None
+    lower = grid.lower + (deep.min(axis=0) - 1) * grid.resolution
+    upper = grid.lower + (deep.max(axis=0) + 1) * grid.resolution
+    return np.stack(np.meshgrid(*zip(lower, upper, strict=True)), -1).reshape(-1, 3)
+
+
 class RobotPenetration:
     """The paper's pxpen(x, p): penetration depth (m) of point p into the robot at EE pose x.
 

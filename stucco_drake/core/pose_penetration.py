@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from stucco_drake.core.icp import cross_section_sdf, sample_outline, transform
-from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.penetration import RobotPenetration, deep_box_corners
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
 #: Pair budget of one vectorised penetration block: (restart, config) pairs x model points.
@@ -80,13 +80,10 @@ def restart_penetration(
     poses = np.asarray(poses, dtype=np.float64)
     configs = np.asarray(config_positions, dtype=np.float64)
     scores = np.zeros(len(poses))
-    grid = penetration.robot_sdf
-    deep = np.argwhere(grid.values < -tolerance)
-    if len(configs) == 0 or len(deep) == 0:
+    corners = deep_box_corners(penetration.robot_sdf, tolerance)
+    if len(configs) == 0 or corners is None:
         return scores
-    lower = grid.lower + (deep.min(axis=0) - 1) * grid.resolution
-    upper = grid.lower + (deep.max(axis=0) + 1) * grid.resolution
-    corners = np.stack(np.meshgrid(*zip(lower, upper, strict=True)), -1).reshape(-1, 3)
+    lower, upper = corners.min(axis=0), corners.max(axis=0)
     robot_reach = np.linalg.norm(corners, axis=1).max()
     model_reach = np.linalg.norm(model_xy, axis=1).max()
     gap = np.linalg.norm(configs[None, :, :2] - poses[:, None, :2], axis=-1)
