@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from stucco_drake.core import BoxSdf, GridSdf, RobotPenetration
-from stucco_drake.core.deep_region import deep_region
+from stucco_drake.core.deep_region import axial_slack2, deep_region
 from stucco_drake.core.float32_frames import fused_multiply_add_float32, in_frame_float32
 from stucco_drake.core.state_pairs import column_states, float_bits, penetrating_entries
 
@@ -83,8 +83,9 @@ def test_column_states_group_exactly_equal_entries():
         assert states.counts[column] == len(distinct)
 
 
-def shared_belief(rng, n_particles, n, n_slots):
-    """Particles that are perturbed copies of a few ancestors, with a few orientation slots."""
+def shared_belief(rng, n_particles, n, n_slots, tilt=0.0):
+    """Particles that are perturbed copies of a few ancestors, with a few orientation slots
+    (turned about the vertical; the last also tilted by ``tilt`` rad about x)."""
     ancestors = rng.normal(0, 0.02, (2, 3, 3, n))
     pick = rng.integers(0, 3, n_particles)
     moved = rng.random((n_particles, n)) < 0.15
@@ -96,18 +97,24 @@ def shared_belief(rng, n_particles, n, n_slots):
     yaws = np.concatenate([[0.0], rng.uniform(-0.5, 0.5, n_slots - 1)])
     rotations = np.array([[[np.cos(y), -np.sin(y), 0], [np.sin(y), np.cos(y), 0], [0, 0, 1]]
                           for y in yaws])  # fmt: skip
+    c, s = np.cos(tilt), np.sin(tilt)
+    rotations[-1] = rotations[-1] @ np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
     return points, configs, slots.astype(np.int32), rotations
 
 
-@pytest.mark.parametrize("n_slots", [1, 4])
-def test_state_pair_sums_equal_a_brute_force_pass_and_the_per_orientation_pass(n_slots):
+@pytest.mark.parametrize(("n_slots", "tilt"), [(1, 0.0), (4, 0.0), (4, 0.3), (4, 1e-4)])
+def test_state_pair_sums_equal_a_brute_force_pass_and_the_per_orientation_pass(n_slots, tilt):
+    """Turned about the vertical, a slot is screened by its layer reach; tilted 0.3 rad, by
+    the ball around the deep region; tilted 1e-4 rad, by the layer reach with its slack."""
     grid = GridSdf.build(BoxSdf((0.02, 0.01, 0.015)), [-0.03, -0.02, -0.025], [0.03, 0.02, 0.025],
                          1e-3)  # fmt: skip
     penetration = RobotPenetration(grid)
     rng = np.random.default_rng(3 + n_slots)
     tolerance = 0.002
-    points, configs, slots, rotations = shared_belief(rng, 100, 30, n_slots)
+    points, configs, slots, rotations = shared_belief(rng, 100, 30, n_slots, tilt)
     region = deep_region(grid, tolerance)
+    layer_screened, _ = axial_slack2(rotations, region, grid.resolution)
+    assert layer_screened[-1] == (tilt < 0.01)  # the case covers the screen it names
     entries = penetrating_entries(grid, tolerance, region, points, configs, slots, rotations,
                                   1 << 20)  # fmt: skip
     assert entries is not None  # shared enough for the state pairs (no per-particle pass)

@@ -3,7 +3,11 @@
 Screens for the in-contact penetration check (:mod:`stucco_drake.core.state_pairs`): a ball in
 the end-effector frame E around the deep nodes, and each grid cell's smallest corner value.
 Both are exact for the trilinear interpolant (which lies between its cell's corner values), so
-no pair that penetrates is screened out, whatever the grid's values.
+no pair that penetrates is screened out, whatever the grid's values. For configs whose frame
+keeps E's z axis along the world's (a planar gripper turned about the vertical, up to a small
+tilt) a tighter screen needs no rotation at all: per layer of cells along z, the farthest any
+deep cell reaches from E's z axis, against the pair's horizontal offset, which turning about z
+leaves unchanged (:func:`within_layer_reach`).
 """
 
 from __future__ import annotations
@@ -32,6 +36,12 @@ class DeepRegion:
         grown_minimum: the same over each cell and its 26 neighbours: a screen for coordinates
             known only to within a cell.
         level: a pair whose cell minimum is not below this cannot penetrate that deep.
+        layer_reach2: (n_layers + 4,) float32: entry L + 2, for the layer L of cells along z
+            (L = -1 .. n_layers, one beyond the grid either way), is the largest squared
+            distance (m^2) from E's z axis of any point of a deep cell in layers L - 1 .. L + 1;
+            -1 where there is none and at both ends (layers -2 and n_layers + 1 stand for
+            everything beyond).
+        extent: the farthest any point of the grid lies from E's origin (m).
     """
 
     center: np.ndarray
@@ -39,6 +49,8 @@ class DeepRegion:
     cell_minimum: np.ndarray
     grown_minimum: np.ndarray
     level: float
+    layer_reach2: np.ndarray
+    extent: float
 
 
 def deep_region(grid: GridSdf, tolerance: float) -> DeepRegion | None:
@@ -62,8 +74,57 @@ def deep_region(grid: GridSdf, tolerance: float) -> DeepRegion | None:
     grown_minimum = np.full(v.shape, np.inf, dtype=np.float32)
     cell_minimum[:-1, :-1, :-1] = corners
     grown_minimum[:-1, :-1, :-1] = grown
+    layer_reach2 = _layer_reach2(grid, corners < level)
     return DeepRegion(center, reach + (math.sqrt(3.0) + 1.0) * grid.resolution,
-                      cell_minimum.ravel(), grown_minimum.ravel(), level)  # fmt: skip
+                      cell_minimum.ravel(), grown_minimum.ravel(), level, layer_reach2,
+                      _extent(grid))  # fmt: skip
+
+
+def _extent(grid: GridSdf) -> float:
+    upper = grid.lower + (np.array(grid.values.shape) - 1) * grid.resolution
+    return float(np.linalg.norm(np.maximum(np.abs(grid.lower), np.abs(upper))))
+
+
+def _layer_reach2(grid: GridSdf, deep_cells: np.ndarray) -> np.ndarray:
+    """Squared reach from E's z axis per layer of cells, grown by one layer each way and
+    padded (see :class:`DeepRegion`); each cell reaches as far as its farthest corner."""
+    h = grid.resolution
+    x = grid.lower[0] + h * np.arange(deep_cells.shape[0] + 1)
+    y = grid.lower[1] + h * np.arange(deep_cells.shape[1] + 1)
+    corner_x2 = np.maximum(x[:-1] ** 2, x[1:] ** 2)
+    corner_y2 = np.maximum(y[:-1] ** 2, y[1:] ** 2)
+    cell_reach2 = corner_x2[:, None] + corner_y2[None, :]
+    per_layer = np.where(deep_cells, cell_reach2[:, :, None], -1.0).max(axis=(0, 1))
+    padded = np.pad(per_layer, 2, constant_values=-1.0)
+    grown = np.pad(np.maximum.reduce([padded[:-2], padded[1:-1], padded[2:]]), 1,
+                   constant_values=-1.0)  # fmt: skip
+    # float32, rounded up: the screen must not be tighter than the float64 bound.
+    return np.where(grown < 0, -1.0, grown * (1 + 1e-6)).astype(np.float32)
+
+
+def axial_slack2(rotations: np.ndarray, region: DeepRegion, resolution: float):
+    """Per orientation slot: whether :func:`within_layer_reach` may screen its configs, and the
+    squared slack (m^2) it must add. A tilt t = |R e_z - e_z| moves a point's E-frame z by at
+    most t * extent (allowed while under half a cell: the grown layers cover it) and its
+    squared horizontal distance by at most 2 * extent * dev + dev^2; 1e-7 m^2 covers float32
+    rounding of the offsets and the rotations (about 1e-8 m at 0.1 m)."""
+    rotations = np.asarray(rotations, dtype=np.float64)
+    tilt = np.linalg.norm(rotations[:, :, 2] - np.array([0.0, 0.0, 1.0]), axis=1)
+    deviation = tilt * region.extent
+    usable = deviation < 0.5 * resolution
+    slack2 = 2.0 * region.extent * deviation + deviation**2 + 1e-7
+    return usable, slack2.astype(np.float32)
+
+
+def within_layer_reach(grid: GridSdf, region: DeepRegion, offset, slack2) -> np.ndarray:
+    """Which world offsets (3, k) float32 (point minus config, m) of configs turned about the
+    vertical (:func:`axial_slack2`'s ``usable``) could lie in a deep cell: their squared
+    horizontal distance within their z layer's reach plus ``slack2`` (k,)."""
+    layer = np.floor(offset[2] * np.float32(1.0 / grid.resolution)
+                     - np.float32(grid.lower[2] / grid.resolution))  # fmt: skip
+    n_layers = grid.values.shape[2] - 1
+    reach2 = region.layer_reach2[np.clip(layer, -2, n_layers + 1).astype(np.int64) + 2]
+    return offset[0] ** 2 + offset[1] ** 2 <= reach2 + slack2
 
 
 def could_penetrate(grid: GridSdf, region: DeepRegion, cells, within_a_cell=False):
