@@ -54,10 +54,8 @@ def in_frame_float32(frame_t: np.ndarray, vectors: np.ndarray) -> np.ndarray:
         vectors: (3, k) float32 world vectors (m).
     """
     frame_t = np.asarray(frame_t, dtype=np.float32)
-    rows = []
-    for i in range(3):
-        r = frame_t[..., i, :]
-        acc = r[..., 0] * vectors[0]
-        acc = fused_multiply_add_float32(r[..., 1], vectors[1], acc)
-        rows.append(fused_multiply_add_float32(r[..., 2], vectors[2], acc))
-    return np.stack(rows)
+    # Column j of each matrix as a (3, k) (or (3, 1)) array: all three rows in one call.
+    column = [np.moveaxis(frame_t[..., :, j], -1, 0).reshape(3, -1) for j in range(3)]
+    acc = column[0] * vectors[0]
+    acc = fused_multiply_add_float32(column[1], vectors[1], acc)
+    return fused_multiply_add_float32(column[2], vectors[2], acc)

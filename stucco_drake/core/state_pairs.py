@@ -83,29 +83,52 @@ def column_states(keys: list[np.ndarray]) -> ColumnStates:
     """Group equal entries of each column: ``keys`` (at most eight) are (n_particles, n) integer
     arrays (e.g. the bits of x, y, z), entries being equal when all keys are.
 
-    A state is a run of equal entries in the hash order, so every state holds one value
+    Columns that every particle holds alike (after resampling, most of them) are one state
+    each, found by comparing with the first particle; only the others are sorted. There a
+    state is a run of equal entries in the hash order, so every state holds one value
     exactly; a hash collision can only split a value into two states (the same sums, a few
     more evaluations), never merge two values.
     """
     n_particles, n = keys[0].shape
-    by_column = [np.ascontiguousarray(k.T) for k in keys]  # (n, n_particles)
+    uniform = np.ones(n, dtype=bool)
+    for k in keys:
+        uniform &= (k == k[:1]).all(axis=0)
+    diverse = np.flatnonzero(~uniform)
+    by_column = [np.ascontiguousarray(k[:, diverse].T) for k in keys]  # (m, n_particles)
     order = _sorted_by_value(by_column)
-    flat_order = order + (np.arange(n) * n_particles)[:, None]  # into the raveled columns
-    new_state = np.zeros((n, n_particles), dtype=bool)
+    flat_order = order + (np.arange(diverse.size) * n_particles)[:, None]  # into the ravel
+    new_state = np.zeros((diverse.size, n_particles), dtype=bool)
     new_state[:, 0] = True
     for k in by_column:
         ranked = k.ravel()[flat_order]
         new_state[:, 1:] |= ranked[:, 1:] != ranked[:, :-1]
-    counts = new_state.sum(axis=1)
+    counts = np.ones(n, dtype=np.int64)
+    counts[diverse] = new_state.sum(axis=1)
     offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    # Columns are consecutive rows here, so one running count numbers every state globally.
-    rank = (np.cumsum(new_state.ravel(), dtype=np.int64) - 1).reshape(n, n_particles)
-    ids = np.empty((n, n_particles), dtype=np.int64)
-    ids.ravel()[flat_order] = rank
-    holders = order[new_state]  # row-major: column by column, states in rank order
-    columns = np.repeat(np.arange(n), counts)
-    return ColumnStates(ids.T, offsets, counts, holders, columns,
-                        _particle_masks(ids, int(counts.sum())))  # fmt: skip
+    n_states = int(counts.sum())
+    # A diverse column's states in rank order, numbered from its offset.
+    local = np.empty((diverse.size, n_particles), dtype=np.int64)
+    local.ravel()[flat_order] = np.cumsum(new_state, axis=1) - 1
+    diverse_ids = local + offsets[diverse][:, None]
+    ids = np.repeat(offsets[None, :], n_particles, axis=0)
+    ids[:, diverse] = diverse_ids.T
+    holders = np.zeros(n_states, dtype=np.intp)
+    holders[_ranges(offsets[diverse], counts[diverse])] = order[new_state]
+    masks = _particle_masks(diverse_ids, n_states)
+    masks[:, offsets[uniform]] = _all_particles(n_particles)[:, None]
+    return ColumnStates(ids, offsets, counts, holders, np.repeat(np.arange(n), counts), masks)
+
+
+def _ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Concatenated ranges [start, start + length) as one index array."""
+    within = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    return np.repeat(starts, lengths) + within
+
+
+def _all_particles(n_particles: int) -> np.ndarray:
+    """The mask words (uint32) with every particle's bit set."""
+    held = [min(32, n_particles - 32 * word) for word in range((n_particles + 31) // 32)]
+    return np.array([(1 << bits) - 1 for bits in held], dtype=np.uint32)
 
 
 def _particle_masks(ids: np.ndarray, n_states: int) -> np.ndarray:
@@ -167,7 +190,7 @@ def _penetrating_state_pairs(grid, tolerance, region, config_state, point_state,
     exactly-identity orientation that is the difference the per-orientation pass forms.
     """
     slot = table[3]
-    frames_t, identity = frames
+    identity = frames[1]
     inverse_h = np.float32(1.0 / grid.resolution)
     origin_cells = (grid.lower / grid.resolution).astype(np.float32)
     pair_slot = slot[config_state]
@@ -175,12 +198,6 @@ def _penetrating_state_pairs(grid, tolerance, region, config_state, point_state,
     cells = [offset[a, which] * inverse_h - origin_cells[a] for a in range(3)]
     rotated = np.flatnonzero(~identity[pair_slot])
     if rotated.size:
-        # A plain float32 rotation (off by ~1e-7 m, far less than a cell) screens the pairs
-        # first; only those left are rotated with the exact rounding.
-        rough = np.einsum("kij,jk->ik", np.take(frames_t, pair_slot[rotated], axis=0),
-                          np.take(offset, rotated, axis=1))
-        rough_cells = [rough[a] * inverse_h - origin_cells[a] for a in range(3)]
-        rotated = rotated[could_penetrate(grid, region, rough_cells, within_a_cell=True)]
         exact = _rotated_differences(config_state[rotated], point_state[rotated], table, frames)
         which = np.concatenate([which, rotated])
         cells = [np.concatenate([c, e * inverse_h - o])
