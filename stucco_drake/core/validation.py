@@ -24,9 +24,17 @@ def as_finite_array(value, name: str, shape: tuple, dtype=np.float64) -> np.ndar
     return array
 
 
+_IDENTITY = np.eye(3)
+_ORTHONORMAL_TOLERANCE = 1e-6 + 1e-5 * _IDENTITY
+
+
 def as_rotation(value, name: str) -> np.ndarray:
     """Return ``value`` as a 3x3 rotation matrix, rejecting non-orthonormal input."""
     rotation = as_finite_array(value, name, (3, 3))
-    if not np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6) or np.linalg.det(rotation) < 0:
+    # np.allclose(R R^T, I, atol=1e-6) and det(R) >= 0, written out: this runs on every
+    # tracker update, and the general routines cost more than the update's own bookkeeping.
+    error = np.abs(rotation @ rotation.T - _IDENTITY)
+    determinant = np.linalg.det(rotation)
+    if not (error <= _ORTHONORMAL_TOLERANCE).all() or determinant < 0:
         raise ValueError(f"{name}: not a rotation matrix (R R^T != I or det(R) < 0)")
     return rotation
