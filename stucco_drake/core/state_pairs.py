@@ -228,7 +228,7 @@ def _rotated_differences(config_state, point_state, table, frames):
 
 def penetrating_entries(grid, tolerance, region, points, configs, rotation_index, rotations,
                         budget):  # fmt: skip
-    """Every (particle, slot, config, point, excess) whose pair penetrates beyond ``tolerance``.
+    """The (config, point) state pairs that penetrate beyond ``tolerance`` and who holds them.
 
     Args:
         grid: the robot's signed distance in frame E (m).
@@ -239,11 +239,13 @@ def penetrating_entries(grid, tolerance, region, points, configs, rotation_index
         rotations: (n_slots, 3, 3) R_WE of each slot.
         budget: state pairs per vectorised block; bounds scratch memory.
 
-    Returns None when the particles share too few states for this to pay off.
+    Returns:
+        :class:`PenetratingPairs`, or None when the particles share too few states for this to
+        pay off.
     """
-    empty = np.zeros(0, dtype=np.int64)
+    n_particles = points.shape[1]
     if region is None:
-        return empty, empty, empty, empty, np.zeros(0, dtype=np.float32)
+        return _no_pairs(n_particles)
     n_particles = points.shape[1]
     table = _state_table(points, configs, rotation_index)
     states, point_world, config_world, slot = table
@@ -270,11 +272,30 @@ def penetrating_entries(grid, tolerance, region, points, configs, rotation_index
                                              point_state[near], np.take(offset, near, axis=1),
                                              table, frames))  # fmt: skip
     if not hits:
-        return empty, empty, empty, empty, np.zeros(0, dtype=np.float32)
+        return _no_pairs(n_particles)
     config_state, point_state, excess = (np.concatenate(v) for v in zip(*hits, strict=True))
-    particle, which = _holders_of_both(config_state, point_state, states, n_particles)
-    return (particle, slot[config_state[which]], states.columns[config_state[which]],
-            states.columns[point_state[which]], excess[which])  # fmt: skip
+    return PenetratingPairs(slot[config_state], states.columns[config_state],
+                            states.columns[point_state], excess,
+                            _holders_of_both(config_state, point_state, states, n_particles))
+
+
+@dataclass(frozen=True)
+class PenetratingPairs:
+    """State pairs that penetrate, k of them: the config's orientation ``slot``, the contact
+    columns of the ``config`` and the ``point``, the float32 ``excess`` (m) beyond the
+    tolerance, and ``holders`` (k, n_particles) bool, the particles holding both states."""
+
+    slot: np.ndarray
+    config: np.ndarray
+    point: np.ndarray
+    excess: np.ndarray
+    holders: np.ndarray
+
+
+def _no_pairs(n_particles: int) -> PenetratingPairs:
+    empty = np.zeros(0, dtype=np.int64)
+    return PenetratingPairs(empty, empty, empty, np.zeros(0, dtype=np.float32),
+                            np.zeros((0, n_particles), dtype=bool))  # fmt: skip
 
 
 def near_state_pairs(grid, region, table, rotations, axial, slack2):
@@ -330,40 +351,48 @@ def _shared_words(config_state, point_state, states) -> list[np.ndarray]:
     return [words.take(config_state) & words.take(point_state) for words in states.masks]
 
 
-def _holders_of_both(config_state, point_state, states, n_particles: int):
-    """(particle, pair) for every particle holding both states of a pair: the bits of the
+def _holders_of_both(config_state, point_state, states, n_particles: int) -> np.ndarray:
+    """(k, n_particles) bool: the particles holding both states of each pair, the bits of the
     intersection of their particle sets."""
     both = np.stack(_shared_words(config_state, point_state, states), axis=1).astype("<u4")
     bits = np.unpackbits(both.view(np.uint8), axis=1, bitorder="little")[:, :n_particles]
-    pair, particle = np.nonzero(bits)
-    return particle, pair
+    return bits.view(bool)
 
 
-def ordered_sums(entries, n_particles: int, n_points: int):
+def ordered_sums(pairs: PenetratingPairs, n_particles: int, n_points: int):
     """per_particle (n_particles,) and per_point (n_particles, n_points) float64 sums of the
-    entries' excess, added in the order of a per-particle, per-orientation pass (module doc)."""
-    particle, slot, config, point, excess = entries
+    pairs' excess over their holders, added in the order of a per-particle, per-orientation
+    pass (module doc).
+
+    A particle holds one state per contact, so it holds at most one pair per (config, point):
+    with the pairs sorted by (slot, config, point), the particle-major nonzeros of the holders
+    are each particle's entries in summation order, with no sort of the entries themselves.
+    """
     per_particle = np.zeros(n_particles)
     per_point = np.zeros((n_particles, n_points))
-    if particle.size == 0:
+    if pairs.excess.size == 0:
         return per_particle, per_point
-    n_slots = int(slot.max()) + 1
-    weights = excess.astype(np.float64)
+    slot, config, point = pairs.slot, pairs.config, pairs.point
+    weights = pairs.excess.astype(np.float64)
 
-    def folded(outer, inner):
-        """Sum in (outer, slot, inner) order, each slot's subtotal added to the running total
-        of its ``outer`` group (bincount adds in input order, one addition per entry)."""
-        key = (outer * n_slots + slot) * (n_points * n_points) + inner
-        order = np.argsort(key, kind="stable")
-        group = (outer * n_slots + slot)[order]
-        first = np.ones(group.size, dtype=bool)
-        first[1:] = group[1:] != group[:-1]
-        subtotal = np.bincount(np.cumsum(first) - 1, weights[order])
-        return outer[order][first], subtotal
+    def folded(order, outer_of):
+        """Sum each particle's entries in ``order`` of the pairs, each (outer, slot) group's
+        subtotal added to its ``outer`` group's running total (bincount adds in input order,
+        one addition per entry); the groups are consecutive in that order."""
+        # Flat nonzeros of the particle-major copy: several times faster than 2-D nonzero.
+        particle, rank = np.divmod(np.flatnonzero(pairs.holders[order].T.copy()), order.size)
+        pair = order[rank]
+        outer = outer_of(particle, pair)
+        group_slot = slot[pair]
+        first = np.ones(pair.size, dtype=bool)
+        first[1:] = (outer[1:] != outer[:-1]) | (group_slot[1:] != group_slot[:-1])
+        subtotal = np.bincount(np.cumsum(first) - 1, weights[pair])
+        return outer[first], subtotal
 
-    rows, subtotal = folded(particle, config * n_points + point)
+    rows, subtotal = folded(np.lexsort((point, config, slot)), lambda particle, _: particle)
     per_particle += np.bincount(rows, subtotal, minlength=n_particles)
-    rows, subtotal = folded(particle * n_points + point, config)
+    rows, subtotal = folded(np.lexsort((config, slot, point)),
+                            lambda particle, pair: particle * n_points + point[pair])
     per_point += np.bincount(rows, subtotal, minlength=n_particles * n_points).reshape(
         n_particles, n_points
     )
