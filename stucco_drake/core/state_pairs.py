@@ -4,11 +4,12 @@ After resampling most particles hold identical copies of a contact, and a predic
 moves a copy or not, so across 100 particles a contact (its point, config and orientation) takes
 only a few distinct values: its *states*. The penetration of a (config, point) pair depends only
 on the two states, so it is evaluated once per state pair that some particle holds and credited
-to every particle holding both. Pairs are screened before any exact work: column pairs by the
-boxes of their states, state pairs by a ball around the robot's deep region, then by the grid
-cell's smallest corner value (:mod:`stucco_drake.core.deep_region`); a config in a rotated
-orientation is first screened with a plain float32 rotation, and only the pairs left are rotated
-with the fixed rounding of :mod:`stucco_drake.core.float32_frames` and interpolated.
+to every particle holding both. Candidate pairs come from k-d tree range searches (configs
+turned about the vertical: within the deep region's farthest reach from E's z axis, in the
+plane; others: within the ball around the deep region), then the particle-set test, then each
+pair's per-layer reach and the grid cell's smallest corner value
+(:mod:`stucco_drake.core.deep_region`); only then are rotated configs rotated, with the fixed
+rounding of :mod:`stucco_drake.core.float32_frames`, and the grid interpolated.
 
 The sums are formed exactly as a per-particle, per-orientation pass over all pairs forms them
 (the tracker's float64 sums of float32 excesses are compared against 0 and against each other,
