@@ -2,7 +2,7 @@
 
 :func:`build_bor_diagram` nests a scene's Diagram (plant, joint control, planar IK and action
 sequence; see :mod:`stucco_drake.scenes.builder`) and adds around it, with
-:func:`~stucco_drake.contact_tracking.add_contact_tracking` (the chain any Diagram can use),
+:func:`~stucco_drake.tracking.add_contact_tracking` (the chain any Diagram can use),
 
     robot state + applied torque -> ExternalWrenchEstimator -> ContactDetector
     -> ContactIsolator (bubbles first, BubbleContactSensor; else the CPF)
@@ -26,7 +26,6 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from stucco_drake.bor.grasp import build_grasp_scene
-from stucco_drake.contact_tracking import Tactile, add_contact_tracking
 from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
@@ -50,6 +49,7 @@ from stucco_drake.systems.planar_controller import ActionClock
 from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
 from stucco_drake.systems.target_pose_estimator import TargetPoseEstimator
 from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
+from stucco_drake.tracking import Tactile, add_contact_tracking
 
 
 @dataclasses.dataclass
