@@ -14,7 +14,7 @@ import sys
 import pytest
 
 from stucco_drake.cli import main
-from stucco_drake.inputs import InputError, prepare_output_file, prepare_output_folder
+from stucco_drake.core.inputs import InputError, prepare_output_file, prepare_output_folder
 from stucco_drake.scenes import DIAGRAMS_DIR
 
 
@@ -27,10 +27,10 @@ def tripwire(monkeypatch):
     """Replaces everything a command does after its checks with a WorkStarted raise."""
     import stucco_drake.bor.cli
     import stucco_drake.bor.episode
+    import stucco_drake.cli.sweep
     import stucco_drake.eval.cli_table
     import stucco_drake.scenes
     import stucco_drake.scenes.meshcat_session
-    import stucco_drake.sweep_cli
 
     def work(*args, **kwargs):
         raise WorkStarted("the command started its work")
@@ -41,7 +41,7 @@ def tripwire(monkeypatch):
         (stucco_drake.bor.episode, "run_episode"),  # run
         (stucco_drake.bor.cli, "bor_graphviz"),  # diagram
         (stucco_drake.eval.cli_table, "make_table"),  # table
-        (stucco_drake.sweep_cli, "run_sweep"),  # sweep
+        (stucco_drake.cli.sweep, "run_sweep"),  # sweep
     ]:
         monkeypatch.setattr(module, name, work)
 

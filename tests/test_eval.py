@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from stucco_drake.core.baselines import TRACKER_NAMES
+from stucco_drake.core.inputs import InputError
 from stucco_drake.eval import (
     EpisodeLog,
     RunInterrupted,
@@ -24,7 +25,6 @@ from stucco_drake.eval import (
     synthetic_episode,
 )
 from stucco_drake.eval.cli_table import add_table_command, check_names, make_table
-from stucco_drake.inputs import InputError
 
 ROW_KEYS = ("scene", "seed", "method")
 

@@ -1,5 +1,5 @@
 """Seeded runs are bit-identical across processes and do not depend on the CPU kernels that
-numpy and OpenBLAS would pick on another machine (stucco_drake.kernels pins them)."""
+numpy and OpenBLAS would pick on another machine (stucco_drake.runtime.kernels pins them)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from stucco_drake import kernels
 from stucco_drake.eval.episode_log import EpisodeLog
+from stucco_drake.runtime import kernels
 
 # What a machine with older vector units would choose by itself: OpenBLAS's kernels without
 # fused multiply-add, numpy's loops without AVX2, and two BLAS threads.
@@ -25,7 +25,7 @@ OTHER_CPU = {
 
 _EPISODE = textwrap.dedent("""
     import json, sys
-    from stucco_drake import kernels
+    from stucco_drake.runtime import kernels
     from stucco_drake.bor.log import log_penetration, record_episode
     from stucco_drake.eval.replay import replay
 

@@ -137,8 +137,8 @@ def test_observed_robot_rejects_bad_arguments():
 def test_contact_tracking_refuses_bad_arguments_before_adding_anything():
     from pydrake.systems.framework import DiagramBuilder
 
-    from stucco_drake.contact_tracking import add_contact_tracking
     from stucco_drake.core import BoxSdf, CylinderSdf, FunctionPenetration, SoftTracker
+    from stucco_drake.tracking import add_contact_tracking
 
     model = planar_arm(MultibodyPlant(0.0))
     robot = ObservedRobot(model, model.GetFrameByName("tip"))

@@ -35,7 +35,6 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
 
-from stucco_drake.contact_tracking import observed_joint_selectors
 from stucco_drake.robot.models import bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import build_scene, load_scene_text
 from stucco_drake.scenes.builder import GRIPPER, IIWA, robot_base_pose
@@ -53,6 +52,7 @@ from stucco_drake.systems.contact_isolator import (
 )
 from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
+from stucco_drake.tracking import observed_joint_selectors
 
 GAIN = 50.0  # observer bandwidth (1/s), bor's default
 SETTLE_STEPS = 50  # 0.1 s at 2 ms: five observer time constants

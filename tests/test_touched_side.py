@@ -8,10 +8,10 @@ import pytest
 
 from stucco_drake.core import BoxSdf, SoftTracker, SoftTrackingParams
 from stucco_drake.core.contact_motion import normal_spread
+from stucco_drake.core.inputs import InputError
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.sdf import GridSdf
 from stucco_drake.eval.cli_table import add_table_command
-from stucco_drake.inputs import InputError
 
 A = [0.10, 0.0, 0.0]  # on one object, touched first by the robot's +x face
 D = [0.21, 0.09, 0.0]  # on a second object, touched next

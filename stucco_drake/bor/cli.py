@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stucco_drake.inputs import (
+from stucco_drake.core.inputs import (
     InputError,
     non_negative_int,
     positive_int,

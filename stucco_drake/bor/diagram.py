@@ -2,7 +2,7 @@
 
 :func:`build_bor_diagram` nests a scene's Diagram (plant, joint control, planar IK and action
 sequence; see :mod:`stucco_drake.scenes.builder`) and adds around it, with
-:func:`~stucco_drake.contact_tracking.add_contact_tracking` (the chain any Diagram can use),
+:func:`~stucco_drake.tracking.add_contact_tracking` (the chain any Diagram can use),
 
     robot state + applied torque -> ExternalWrenchEstimator -> ContactDetector
     -> ContactIsolator (bubbles first, BubbleContactSensor; else the CPF)
@@ -26,7 +26,6 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from stucco_drake.bor.grasp import build_grasp_scene
-from stucco_drake.contact_tracking import Tactile, add_contact_tracking
 from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
@@ -50,6 +49,7 @@ from stucco_drake.systems.planar_controller import ActionClock
 from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
 from stucco_drake.systems.target_pose_estimator import TargetPoseEstimator
 from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
+from stucco_drake.tracking import Tactile, add_contact_tracking
 
 
 @dataclasses.dataclass
@@ -231,20 +231,8 @@ def build_bor_diagram(
 
     noise = scene.sensor_noise
     torque_seed, bubble_seed = _noise_seeds(seed)
-    observer = {"gain": estimator_gain}
-    if noise.torque_std > 0 or noise.velocity_std > 0:
-        observer.update(torque_noise_std=noise.torque_std, velocity_noise_std=noise.velocity_std,
-                        noise_seed=torque_seed)  # fmt: skip
-    # Calibrated once per noise level on draws of their own (seed 0, as a sensor is
-    # calibrated once, not per episode): the detector's statistics are those of the sensor.
-    calibration = dict(observer, noise_seed=0) if "noise_seed" in observer else observer
-    stats = calibrate_residual_statistics(time_step=h, estimator_kwargs=calibration)
-    if external_actions:
-        builder.ExportInput(sub.GetInputPort("planar_step"), "planar_step")
-        clock = builder.AddNamedSystem("action_clock", ActionClock(scene.action_duration))
-        action_index = clock.get_output_port()
-    else:
-        action_index = sub.GetOutputPort("action_index")
+    observer, stats = _observer_settings(scene, h, estimator_gain, torque_seed)
+    action_index = _action_index(builder, sub, scene, external_actions)
     robot = ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))
     truth = RobotObjectContacts(built)
     chain = add_contact_tracking(
@@ -262,15 +250,8 @@ def build_bor_diagram(
         truth=truth, truth_state=sub.GetOutputPort("plant_state"), dx_model=dx_model,
     )  # fmt: skip
     tracking, target, assembler = chain.tracking, chain.target_estimator, chain.assembler
-
     if meshcat is not None:
-        drawing = builder.AddNamedSystem(
-            "contact_tracking_visualizer", ContactTrackingVisualizer(meshcat, shape, 0.05)
-        )
-        for system, name in ((tracking, "map_points"), (tracking, "segment_labels"),
-                             (assembler, "action_contacts"), (target, "target_pose")):  # fmt: skip
-            builder.Connect(system.GetOutputPort(name), drawing.GetInputPort(name))
-
+        _add_drawing(builder, meshcat, shape, chain)
     for name, port in chain.outputs.items():
         if name != "ee_pose":
             builder.ExportOutput(port, name)
@@ -279,3 +260,41 @@ def build_bor_diagram(
     return BorDiagram(diagram, built, method, int(seed), scene.target, shape, penetration,
                       chain.estimator, chain.detector, chain.isolator, chain.bubble_sensor,
                       assembler, tracking, target, truth)  # fmt: skip
+
+
+def _observer_settings(scene: SceneFile, h: float, gain: float, noise_seed: int):
+    """(observer, stats): the wrench estimator's settings (bandwidth ``gain`` K_O in 1/s, and
+    the scene's torque and velocity noise drawn from ``noise_seed``) and the detector's
+    free-space residual statistics calibrated at the plant's time step ``h`` (s)."""
+    noise = scene.sensor_noise
+    observer = {"gain": gain}
+    if noise.torque_std > 0 or noise.velocity_std > 0:
+        observer.update(torque_noise_std=noise.torque_std, velocity_noise_std=noise.velocity_std,
+                        noise_seed=noise_seed)  # fmt: skip
+    # Calibrated once per noise level on draws of their own (seed 0, as a sensor is
+    # calibrated once, not per episode): the detector's statistics are those of the sensor.
+    calibration = dict(observer, noise_seed=0) if "noise_seed" in observer else observer
+    stats = calibrate_residual_statistics(time_step=h, estimator_kwargs=calibration)
+    return observer, stats
+
+
+def _action_index(builder: DiagramBuilder, sub, scene: SceneFile, external_actions: bool):
+    """The port of the current action's index: the scene's action sequence, or with
+    ``external_actions`` an action clock beside the exported ``planar_step`` input."""
+    if not external_actions:
+        return sub.GetOutputPort("action_index")
+    builder.ExportInput(sub.GetInputPort("planar_step"), "planar_step")
+    clock = builder.AddNamedSystem("action_clock", ActionClock(scene.action_duration))
+    return clock.get_output_port()
+
+
+def _add_drawing(builder: DiagramBuilder, meshcat, shape, chain) -> None:
+    """The tracked points, their segments, the action's contacts and the target estimate
+    (``shape`` at the estimated pose) drawn to ``meshcat``, published every 0.05 s."""
+    drawing = builder.AddNamedSystem(
+        "contact_tracking_visualizer", ContactTrackingVisualizer(meshcat, shape, 0.05)
+    )
+    tracking, target, assembler = chain.tracking, chain.target_estimator, chain.assembler
+    for system, name in ((tracking, "map_points"), (tracking, "segment_labels"),
+                         (assembler, "action_contacts"), (target, "target_pose")):  # fmt: skip
+        builder.Connect(system.GetOutputPort(name), drawing.GetInputPort(name))

@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from stucco_drake import kernels
 from stucco_drake.bor.diagram import (
     build_bor_diagram,
     collision_shapes,
@@ -42,6 +41,7 @@ from stucco_drake.eval.sources import EpisodeSource
 from stucco_drake.eval.target_estimates import hypotheses_estimate, rules_estimate
 from stucco_drake.robot.gripper_samples import sample_gripper_surface
 from stucco_drake.robot.gripper_sdf import gripper_penetration
+from stucco_drake.runtime import kernels
 from stucco_drake.scenes import BuiltScene, SceneFile, load_scene, resolve_scene_path, scene_paths
 from stucco_drake.scenes.builder import yaw_of
 
@@ -222,7 +222,7 @@ def record_episode(
                          on_action=recorder.on_action)
     return recorder.log(base.name, seed, action_noise, {
         "wall_time_s": float(result.wall_time_s),
-        "kernels": kernels.status(),  # "pinned": the same log on any machine (kernels.py)
+        "kernels": kernels.status(),  # "pinned": the same log on any machine (runtime/kernels.py)
         "live": {"method": method, "ce_cm": float(result.ce_cm), "fmi": float(result.fmi)},
     })
 

@@ -1,6 +1,8 @@
 """The method in pure numpy/scipy: soft tracking, segmentation, signed distances, metrics.
 
 Nothing in this package imports Drake, so it is testable in milliseconds without a simulator.
+The lowest layer but ``runtime``: it also holds the checks of command-line inputs (``inputs``)
+that every layer's commands share.
 """
 
 from stucco_drake.core.dynamics import TranslationDynamics

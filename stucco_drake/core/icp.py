@@ -166,8 +166,22 @@ def icp_2d(
         raise ValueError(f"max_iterations: must be at least 1, got {max_iterations!r}")
     tolerance = _positive(tolerance, "tolerance")
     n_restarts = int(n_restarts)
+    poses = _start_poses(rng, points, model, n_restarts, initial_pose, start)
+    tree = cKDTree(model)
+    iterations = _fit(points, model, tree, poses, int(max_iterations), tolerance)
+    # The RMS of the last iteration belongs to the pose before its fit; report the returned
+    # poses' own.
+    rms = _rms(points, tree, poses)
+    poses[:, 2] = (poses[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
+    return IcpResult(poses=poses, rms=rms, iterations=iterations)
+
+
+def _start_poses(rng: np.random.Generator, points: np.ndarray, model: np.ndarray,
+                 n_restarts: int, initial_pose, start: str) -> np.ndarray:  # fmt: skip
+    """(B, 3) start poses (x, y, yaw) in W (m, m, rad): yaws drawn from ``rng``, placed at
+    the points' centroid by ``start`` (see :func:`icp_2d`), start 0 replaced by
+    ``initial_pose`` when given."""
     centroid = points.mean(axis=0)
-    centred = points - centroid
     poses = np.empty((n_restarts, 3))
     poses[:, :2] = centroid
     poses[:, 2] = rng.uniform(0.0, 2.0 * np.pi, n_restarts)
@@ -178,11 +192,20 @@ def icp_2d(
         raise ValueError(f"start: expected 'surface' or 'centroid', got {start!r}")
     if initial_pose is not None:
         poses[0] = as_finite_array(initial_pose, "initial_pose", (3,))
-    tree = cKDTree(model)
+    return poses
+
+
+def _fit(points: np.ndarray, model: np.ndarray, tree: cKDTree, poses: np.ndarray,
+         max_iterations: int, tolerance: float) -> np.ndarray:  # fmt: skip
+    """Iterates every restart of ``poses`` (B, 3; updated in place) until its RMS (m) changes
+    by less than ``tolerance`` or ``max_iterations``; returns (B,) the iterations each ran."""
+    n_restarts = len(poses)
+    centroid = points.mean(axis=0)
+    centred = points - centroid
     rms = np.full(n_restarts, np.inf)
     iterations = np.zeros(n_restarts, dtype=np.int64)
     active = np.arange(n_restarts)
-    for _ in range(int(max_iterations)):
+    for _ in range(max_iterations):
         pose = poses[active]
         # Contact points in each restart's object frame: R^T (p - t), as row vectors.
         local = np.einsum("bni,bij->bnj", points[None] - pose[:, None, :2], rotations(pose[:, 2]))
@@ -204,9 +227,12 @@ def icp_2d(
         active = active[~done]
         if len(active) == 0:
             break
-    # The RMS above belongs to the pose before the last fit; report the returned poses' own.
+    return iterations
+
+
+def _rms(points: np.ndarray, tree: cKDTree, poses: np.ndarray) -> np.ndarray:
+    """(B,) root-mean-square distance (m) of the points to their nearest model point at each
+    of ``poses`` (B, 3)."""
     final = np.einsum("bni,bij->bnj", points[None] - poses[:, None, :2], rotations(poses[:, 2]))
     distance, _ = tree.query(final.reshape(-1, 2))
-    rms = np.sqrt(np.mean(distance.reshape(n_restarts, -1) ** 2, axis=1))
-    poses[:, 2] = (poses[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
-    return IcpResult(poses=poses, rms=rms, iterations=iterations)
+    return np.sqrt(np.mean(distance.reshape(len(poses), -1) ** 2, axis=1))

@@ -2,25 +2,28 @@
 
 Frames and units: contact points, end-effector configs and the returned pose are in the world
 frame W (metres); the pose (x, y, yaw) is the planar pose of the target's shape frame O (radians
-for yaw). See :mod:`stucco_drake.core.icp` for the fitting itself.
+for yaw). See :mod:`stucco_drake.core.icp` for the fitting itself and
+:mod:`stucco_drake.core.segment_selection` for the estimator's steps and the reasons for each.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import itertools
 
 import numpy as np
 
-from stucco_drake.core.icp import icp_2d, sample_outline
-from stucco_drake.core.outline_fit import pooled_noise_variance, shape_excess, shape_sse
+from stucco_drake.core.icp import sample_outline
 from stucco_drake.core.penetration import RobotPenetration
-from stucco_drake.core.pose_penetration import (
-    penetration_window,
-    restart_penetration,
-    sample_cross_section,
+from stucco_drake.core.pose_penetration import sample_cross_section
+from stucco_drake.core.segment_selection import (
+    GroupFit,
+    ShapeEvidence,
+    candidate_groups,
+    choose_segment,
+    fit_groups,
+    restart_scores,
+    shape_evidence,
 )
-from stucco_drake.core.segment_extent import outline_extent, split_wider_segments, xy_extent
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.validation import as_finite_array, as_rotation
 
@@ -29,7 +32,7 @@ SELECTIONS = ("shape", "paper")
 
 #: Penetration (m) forgiven per pair at the configs before the penetration window at which the
 #: chosen segment was touched: how far the target may have moved since (see
-#: :func:`estimate_target_pose`).
+#: :func:`~stucco_drake.core.segment_selection.restart_scores`).
 TOUCH_TOLERANCE = 0.01
 
 
@@ -49,8 +52,9 @@ class SegmentReport:
         best_rms: lowest ICP RMS over its restarts (m); NaN when not fitted.
         shape_excess: how much worse the target's outline explains the points than the best
             circle or line does, as a log-likelihood-ratio statistic (dimensionless, see
-            :func:`shape_excess`); NaN when not fitted. A union's is the sum of its fitted
-            members' (see :func:`estimate_target_pose`).
+            :func:`~stucco_drake.core.outline_fit.shape_excess`); NaN when not fitted. A
+            union's is the sum of its fitted members' (see
+            :func:`~stucco_drake.core.segment_selection.shape_evidence`).
         consistent: whether the segment passed the shape test (``shape_excess`` at most the
             threshold; for a union, whether every fitted member did); True when the rule does
             not test shapes, False when not fitted.
@@ -113,161 +117,28 @@ class TargetPoseEstimate:
 
 
 def estimate_target_pose(
-    rng: np.random.Generator,
-    points,
-    labels,
-    shape: BoxSdf | CylinderSdf,
-    penetration: RobotPenetration | None = None,
-    config_positions=None,
-    config_rotation=None,
-    *,
-    n_restarts: int = 30,
-    spacing: float = 0.002,
-    fill_spacing: float = 0.005,
-    penetration_tolerance: float = 0.002,
-    max_iterations: int = 50,
-    tolerance: float = 1e-5,
-    min_points: int = 3,
-    initial_pose=None,
-    start: str = "surface",
-    selection: str = "shape",
-    contact_noise: float = 0.002,
-    shape_threshold: float = 9.0,
-    penetration_configs: str | int = "all",
-    point_steps=None,
-    merge_segments: bool = True,
-    split_segments: bool = True,
-    touch_tolerance: float | None = TOUCH_TOLERANCE,
-) -> TargetPoseEstimate:
+    rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
+    penetration: RobotPenetration | None = None, config_positions=None, config_rotation=None,
+    *, n_restarts: int = 30, spacing: float = 0.002, fill_spacing: float = 0.005,
+    penetration_tolerance: float = 0.002, max_iterations: int = 50, tolerance: float = 1e-5,
+    min_points: int = 3, initial_pose=None, start: str = "surface", selection: str = "shape",
+    contact_noise: float = 0.002, shape_threshold: float = 9.0,
+    penetration_configs: str | int = "all", point_steps=None, merge_segments: bool = True,
+    split_segments: bool = True, touch_tolerance: float | None = TOUCH_TOLERANCE,
+) -> TargetPoseEstimate:  # fmt: skip
     """Estimate the target's planar pose from segmented contact points (paper Sec. V-C).
 
-    1. Every segment (label >= 0; negative labels are noise) with at least ``min_points``
-       points is fitted by :func:`~stucco_drake.core.icp.icp_2d` with ``n_restarts`` starts
-       against the target's outline at contact height (three contacts are the fewest that can
-       pin a planar pose).
-    2. With ``selection="shape"`` (default), segments whose points a circle or a line explains
-       much better than the target's outline are set aside first: the segment's
-       :func:`shape_excess`, a log-likelihood-ratio statistic with a noise scale pooled
-       over the segments and floored at ``contact_noise`` (m), must not exceed
-       ``shape_threshold`` (9: a likelihood ratio of e^4.5, about 90, or 3 sigma; both fits
-       have 3 parameters, so no complexity penalty is needed). If every fitted segment is set
-       aside, the paper's rule picks among them all.
-    3. ``selection="paper"``: the segment whose restarts' positions vary least (sum of
-       unbiased x and y variances, m^2) is taken as the target, as in the paper. Position, not
-       yaw, is compared, so a box's 180-degree symmetry does not count as spread.
-       ``selection="shape"``: of the segments kept, the one with the lowest
-       ``max(shape_excess, -shape_threshold) / 2 + ln(variance) + sse / (2 sigma^2)``
-       is taken: the paper's spread, the shape evidence (a log-likelihood ratio) and the target
-       outline's own fit (its negative log-likelihood under the sensor's noise, ``sse`` the
-       outline's squared residuals, m^2, sigma^2 the noise variance pooled in step 2) as
-       log-scores, so a segment the box explains e-fold better than a curve may have an
-       e-fold larger spread, and a segment the outline misses by several noise widths loses
-       to one it fits to within the noise. Evidence for the
-       outline counts up to the threshold only: it says a segment is not an arc or a line,
-       not which of the segments that are not is the target. Uncapped, tracked points on a can
-       that the tracker had spread into no curve's shape won on it alone (scene BC, seeds 1
-       and 5: excess -61 and -59 on cans; IB seed 5).
-    4. Within it, the restart that penetrates the end-effector configs least is taken, ties
-       (typically several restarts that penetrate nothing) broken by the lowest ICP RMS. This
-       is the paper's rule; the authors' code instead takes the smallest |min signed distance|
-       to the gripper (closest to just touching) with no RMS tie-break.
-
-    Penetration is the robot's own: :class:`RobotPenetration` depth of the posed target's
-    cross-section (outline plus interior, ``fill_spacing`` m) at every config, summed beyond
-    ``penetration_tolerance`` (m) per pair. The robot's geometry is used, not the target's SDF
-    at the config origins, because the gripper reaches centimetres beyond its origin: a pose
-    lying across the fingers must count. The tolerance (default: the sim's intersection
-    tolerance) forgives the millimetres a correct, touching pose sinks into the gripper through
-    contact noise, so such poses tie at zero and the ICP error decides between them.
-    Pass every config visited, oldest first; ``penetration_configs`` picks which count (see
-    :func:`penetration_window`): ``"all"`` (default) as the authors' code, ``"latest"`` (x_t
-    only) as the paper's text, or ``"since_touch"`` (with ``point_steps``), a deviation: only
-    the configs from the chosen segment's last contact on. The target may have been pushed
-    since an earlier config, which then overlaps where it lies now and rejects the true pose.
-    Measured on the Drake BOR episodes FB, BC, IB (seeds 0-2) with the true target contacts
-    projected onto its final surface and segmented correctly (so only this rule is tested),
-    the position error was 4.6-6.6 cm with all configs (about 90 deg off in 7 of 9), 0.0-7.3 cm
-    with x_t alone (too few configs to rule out the mirror image of a touched face: 6.6 and
-    7.3 cm on BC) and 0.0-3.3 cm since the last touch (yaw within 1 deg in all 9).
-    Without ``penetration`` or configs the restart is chosen by RMS alone.
-
-    The configs left out of that window at which the chosen segment's points were sensed
-    (``point_steps``) still count, forgiving ``touch_tolerance`` (m, default 1 cm) per pair
-    instead: the robot touched the target there, so the target's surface was at the robot's
-    then, and it can overlap that config now only by as much as it has moved since. A target
-    pushed further than that is the case the window is for; one that was only rocked or
-    nudged keeps the evidence of every face the robot slid along. Configs at which the robot
-    touched nothing of the segment stay out (the target may have been pushed into where the
-    robot once swept). Measured on the Drake BOR logs (20 seeds of each scene, STUCCO with
-    the `normal` contact motion and the touched-side rule): scene FB's 10 kg box, rocked
-    about 6 mm by each push, was within 4 cm and 12 deg in 8 of 20 runs with the window alone
-    (ICP turned the box across the cloud of its face's tracked points in the rest, and the
-    configs since its last touch, all at its narrow end, did not rule that out), and in 11,
-    12, 11 and 8 with the touched configs at 5, 10, 15 and 20 mm. The other scenes' estimates
-    were as good or better (BC within 4 cm and 25 deg: 13 -> 14 of 20). Its grasps in the
-    tables: 8 -> 14 of 20 on FB, 13 -> 14 on BC (5 -> 10 on FB without the rule); of the 960
-    runs of every method, 223 estimates changed and 40 grasps, 34 of them gains.
-
-    Why the shape test is the default: the variance rule measures how well ICP pins a pose, not
-    whether the segment is the target. A long arc of a large can pins a box better (a box corner
-    wraps a 1.6 rad arc of a 10 cm can, restarts agreeing within ~3-4 cm) than a few contacts on
-    one face of the true box, along which the box slides, so the paper's rule returns the can
-    (scene BC, seed 0: the 32-point can segment, 23 cm from the target). A gate on the ICP RMS
-    alone cannot tell them apart at a few millimetres of noise (there: 6.2 mm on the can, whose
-    points scatter by 5.5 mm about their best circle). The residuals of a box on an arc are
-    structured, though: a circle explains them better, and judged against the sensor's noise
-    pooled over all segments (2.2 mm there) rather than the arc's own scatter, the evidence is
-    decisive (statistic 48 on the can; -5.5 and -0.2 on the target's face and a tomato can;
-    ~30-100 against ~0 for 1 mm synthetic arcs and faces). Clutter that the target's outline
-    fits as well as a circle or a line does (another box, a small can's short arc, a flat face)
-    passes the gate. Among what passes, the variance alone is a near coin flip when the
-    target is touched on a few points (BC: an 11-point L-shaped patch of the tomato can,
-    excess -0.2, spread 3.2e-3 m^2, beat the target's 8 points, excess -5.5, spread
-    4.0e-3 m^2); the shape evidence breaks such ties (score -5.9 against -8.3 for the target),
-    while clear differences in spread still decide between segments of equal evidence.
-    The outline's own fit settles a case both miss (scene TC, seed 0): a 12-point cloud of
-    tracked points on a large can, which neither the target's 3.8 cm circle nor any curve fits
-    (8.5 mm RMS), had the lower spread (4.6e-4 against 1.5e-3 m^2 for the 7 target points
-    fitted to 1.4 mm) and an excess near 0; its outline term, SSE / (2 sigma^2) with the
-    pooled 7.0 mm noise, decides (8.8 against 0.13 for the target). On the Drake BOR logs
-    (seeds 0-5, STUCCO) the target estimate was within 2 cm in 6 of 6 TC runs with this term
-    and 3 of 6 without; FB, IB and BC kept their choices or improved (BC median position
-    error 28 -> 12 cm).
-
-    The outline term's sigma is the pooled one, not the floor ``contact_noise``: one noise
-    model for the whole estimate. Tracked points scatter more than the sensor's contacts (the
-    tracker moves them), and a term at the floor charged every point of a candidate for
-    that scatter, so fewer points won: scene BC, seed 3 (touched-side rule), the box's near
-    end alone (7 points, spread 4.9e-3 m^2, 16 cm off) beat its union with the far end's 2
-    points (spread 6.0e-4 m^2, 2.1 mm RMS) on outline terms of 0.2 against 5.0 at 2 mm; at
-    the pooled 5.2 mm they are 0.03 and 0.7 and the union (2.9 cm off) is taken. Over the
-    Drake BOR logs of the four scenes, 20 seeds, every method and both contact motions (960
-    estimates) the choice changed in 103, 50 of them in BC, mostly to such a union.
-
-    With ``merge_segments`` (default, ``selection="shape"`` only) the union of any two segments
-    whose points span no more than the target's cross-section can (:func:`outline_extent` plus
-    3 ``contact_noise``) is a candidate too, fitted and scored like a segment. The
-    segmentation knows nothing of the target: touched only at the two ends of a 16 cm side, a
-    box becomes two segments farther apart than the segmentation radius, and either alone
-    leaves the box free to slide along that side. A union the outline explains as well pins it
-    (a low spread); one it does not pays for its misfit in the outline term. A union is not
-    compared with a circle or line (two patches of one box need not lie on one curve); it
-    carries its members' shape evidence instead: each fitted member must pass the test, and
-    its statistic is theirs summed.
-
-    With ``split_segments`` (default, ``selection="shape"`` only) it works the other way too:
-    a segment whose points span more than that reach cannot be the target alone, so it is
-    replaced by its parts, the groups of its points that link at the reach
-    (:func:`split_wider_segments`), before anything is fitted. The segmentation links points
-    closer than its radius (13.5 cm with the paper's l = 0.02 and p_c = 0.4), wider than a
-    small target: in scene TC the pushed master chef can's contacts end 10.6-17.9 cm from the
-    tomato can's, so the two share a segment in 4 of 20 episodes even with every point
-    tracked exactly, and ICP then fits the 7.7 cm can into a 20 cm cloud. Measured on the
-    Drake BOR logs (TC, STUCCO with `cone` and the touched-side rule at 5 mm, the 7 merged
-    runs of 20) the target's position error fell from 9.9-11.8 cm to 0.4-0.9 cm. A part that
-    still spans more than the reach is kept whole: nothing in it links at less. A box target
-    is wider than the segmentation radius, so STUCCO's (and DBSCAN's, single linkage at
-    5 cm) segments of a box scene are never split.
+    1. Candidates (:func:`~stucco_drake.core.segment_selection.candidate_groups`): the
+       segments; with ``selection="shape"`` each one wider than the target split into its parts
+       (``split_segments``) and the union of any two that fit within it added
+       (``merge_segments``). Each with ``min_points`` points is fitted by ICP (``fit_groups``).
+    2. ``selection="shape"`` (default) sets aside the groups a circle or a line explains much
+       better than the target's outline (``shape_evidence``).
+    3. The group taken as the target (``choose_segment``): the paper's least spread of the
+       restarts' positions, or with ``"shape"`` the best of spread, shape evidence and the
+       outline's own fit as log-scores.
+    4. Its restart that penetrates the robot least at the configs (``restart_scores``), ties
+       broken by the lowest ICP RMS.
 
     Args:
         rng: caller-seeded generator for the ICP starts (segments in increasing label order).
@@ -275,7 +146,8 @@ def estimate_target_pose(
         labels: (n,) integer segment labels, e.g. ``SoftTracker.segment()``.
         shape: the target's known geometry in its frame O.
         penetration: the robot's pxpen, or None.
-        config_positions: (k, 3) end-effector origins in W (m), or None.
+        config_positions: (k, 3) end-effector origins in W (m), every config visited, oldest
+            first, or None.
         config_rotation: one (3, 3) R_WE for all configs (identity when omitted).
         n_restarts, max_iterations, tolerance, start: ICP settings (see ``icp_2d``);
             ``n_restarts`` >= 2 for a variance.
@@ -288,20 +160,88 @@ def estimate_target_pose(
         contact_noise: standard deviation of the contact points about the touched surface
             (m), the shape test's noise floor.
         shape_threshold: largest shape excess (dimensionless) a target segment may have.
-        penetration_configs: which configs the restarts are checked against, see
-            :func:`penetration_window` (configs must be passed oldest first).
+        penetration_configs: which configs the restarts are checked against: "all" (default),
+            "latest", "since_touch" (needs ``point_steps``) or the last N, see
+            :func:`~stucco_drake.core.pose_penetration.penetration_window`.
         point_steps: (n,) index into ``config_positions`` of the config at which each point
             was sensed (for ``penetration_configs="since_touch"``).
         merge_segments: whether unions of two segments compete as candidates (see above).
-        split_segments: whether a segment wider than the target is replaced by its parts
-            (see above).
-        touch_tolerance: per-pair penetration forgiven (m) at the configs before the window
-            at which the chosen segment was sensed (needs ``point_steps``); None leaves them
-            out.
+        split_segments: whether a segment wider than the target is replaced by its parts.
+        touch_tolerance: per-pair penetration forgiven (m, default 1 cm) at the configs before
+            the window at which the chosen segment was sensed (needs ``point_steps``); None
+            leaves them out.
 
     Raises:
         ValueError: naming the argument, e.g. no contact points or no segment to fit.
     """
+    given = _checked_inputs(points, labels, shape, spacing, fill_spacing, config_positions,
+                            config_rotation, penetration, n_restarts, selection, contact_noise,
+                            touch_tolerance, point_steps)  # fmt: skip
+    by_shape = selection == "shape"
+    labels, groups, singles = candidate_groups(
+        given.points, given.labels, shape, contact_noise, min_points,
+        split=by_shape and split_segments, merge=by_shape and merge_segments)  # fmt: skip
+    fits = fit_groups(rng, groups, given.model, shape, min_points, n_restarts=n_restarts,
+                      max_iterations=max_iterations, tolerance=tolerance,
+                      initial_pose=initial_pose, start=start)  # fmt: skip
+    if not fits:
+        raise NoSegmentToFit(f"labels: no segment has at least {min_points} points")
+    evidence = shape_evidence(fits, singles, selection, contact_noise, shape_threshold)
+    reports = _reports(groups, fits, evidence)
+    chosen = choose_segment(fits, evidence, selection, shape_threshold)
+    fit = fits[chosen]
+    touched = None if given.point_steps is None else given.point_steps[np.isin(labels, chosen)]
+    scores = restart_scores(
+        fit, given.fill, n_restarts, penetration, given.configs, given.config_rotation, touched,
+        penetration_configs=penetration_configs, penetration_tolerance=penetration_tolerance,
+        touch_tolerance=touch_tolerance)  # fmt: skip
+    return _estimate(fit, chosen, labels, scores, reports)
+
+
+def _estimate(fit: GroupFit, chosen: tuple[int, ...], labels: np.ndarray, scores: np.ndarray,
+              reports: tuple[SegmentReport, ...]) -> TargetPoseEstimate:  # fmt: skip
+    """The estimate at the chosen group's restart of least penetration ``scores`` (m), ties
+    broken by the lowest ICP RMS."""
+    # Exact ties are the common case (several restarts with no penetration at all); the small
+    # absolute slack only absorbs summation round-off.
+    tied = np.flatnonzero(scores <= scores.min() + 1e-12)
+    best = tied[np.argmin(fit.result.rms[tied])]
+    x, y, yaw = fit.result.poses[best]
+    return TargetPoseEstimate(
+        x=float(x),
+        y=float(y),
+        yaw=float(yaw),
+        segment=max(chosen, key=lambda label: (int(np.sum(labels == label)), -label)),
+        members=chosen,
+        rms=float(fit.result.rms[best]),
+        penetration=float(scores[best]),
+        restarts=fit.result.poses.copy(),
+        segments=tuple(r for r in reports if not r.merged_with),
+        unions=tuple(r for r in reports if r.merged_with),
+        labels=labels,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Inputs:
+    """The estimator's checked inputs: ``points`` (n, 3) and ``labels`` (n,) as arrays, the
+    ICP ``model`` outline and the cross-section ``fill`` (m, frame O), the ``configs`` (k, 3)
+    in W (m) or None, ``config_rotation`` R_WE or None, ``point_steps`` (n,) or None."""
+
+    points: np.ndarray
+    labels: np.ndarray
+    model: np.ndarray
+    fill: np.ndarray
+    configs: np.ndarray | None
+    config_rotation: np.ndarray | None
+    point_steps: np.ndarray | None
+
+
+def _checked_inputs(points, labels, shape, spacing, fill_spacing, config_positions,
+                    config_rotation, penetration, n_restarts, selection, contact_noise,
+                    touch_tolerance, point_steps) -> _Inputs:  # fmt: skip
+    """The arguments of :func:`estimate_target_pose` checked and converted, in its order;
+    ValueError naming the first bad one."""
     points = as_finite_array(points, "points", (None, 3))
     if len(points) == 0:
         raise ValueError("points: no contact points")
@@ -329,123 +269,23 @@ def estimate_target_pose(
         point_steps = np.asarray(point_steps)
         if point_steps.shape != (len(points),) or not np.issubdtype(point_steps.dtype, np.integer):
             raise ValueError(f"point_steps: expected {len(points)} integer config indices")
+    return _Inputs(points, labels, model, fill, configs, config_rotation, point_steps)
 
-    reach = outline_extent(shape) + 3.0 * contact_noise
-    if selection == "shape" and split_segments:
-        # The segmentation joins the target to a neighbour closer than its linking radius
-        # (13.5 cm with the paper's l and p_c: TC's 7.7 cm tomato can beside a pushed 20 cm
-        # can); a segment wider than the target cannot be the target alone, its parts can.
-        labels = split_wider_segments(points, labels, reach)
-    groups = {(int(label),): points[labels == label] for label in np.unique(labels[labels >= 0])}
-    singles = list(groups)
-    if selection == "shape" and merge_segments:
-        # The segmentation cuts the target in two when it was touched at places farther apart
-        # than the segmentation radius (a 16 cm box side touched at both ends); any two
-        # segments that together fit within the target's extent compete as one.
-        for first, second in itertools.combinations(singles, 2):
-            union = np.concatenate([groups[first], groups[second]])
-            if len(union) >= min_points and xy_extent(union) <= reach:
-                groups[first + second] = union
-    fits = {}
-    for members, group in groups.items():
-        if len(group) < min_points:
-            continue
-        result = icp_2d(
-            rng, group[:, :2], model, n_restarts, max_iterations, tolerance, initial_pose, start
-        )
-        spread = float(np.sum(np.var(result.poses[:, :2], axis=0, ddof=1)))
-        sse = shape_sse(group[:, :2], result.poses, shape)
-        # The model is posed at the segment's mean contact height for the penetration check.
-        fits[members] = (spread, result, float(group[:, 2].mean()), (*sse, len(group)))
-    if not fits:
-        raise NoSegmentToFit(f"labels: no segment has at least {min_points} points")
-    fitted = [members for members in singles if members in fits]
-    # One noise model for the whole estimate: the sensor's, pooled over the segments.
-    sums = [fits[m][3] for m in fitted]
-    noise_variance = pooled_noise_variance(sums, contact_noise) if fitted else contact_noise**2
-    statistics = shape_excess(sums, contact_noise, noise_variance) if fitted else []
-    excess = dict(zip(fitted, statistics, strict=True))
-    consistent = {
-        members: selection == "paper" or bool(excess[members] <= shape_threshold)
-        for members in fitted
-    }
-    for members in fits.keys() - excess.keys():
-        # Two patches of one box need not lie on one circle or line, so comparing a union with
-        # a curve says nothing (an L-shaped face and a can arc fit none: a large, meaningless
-        # negative excess). A union carries its members' own evidence: each fitted member must
-        # pass the test, and their statistics add (independent points, log-likelihoods add).
-        own = [(label,) for label in members if (label,) in excess]
-        excess[members] = float(sum(excess[m] for m in own))
-        consistent[members] = all(consistent[m] for m in own)
-    reports = tuple(
+
+def _reports(groups: dict, fits: dict[tuple, GroupFit],
+             evidence: ShapeEvidence) -> tuple[SegmentReport, ...]:  # fmt: skip
+    """One report per candidate group, in the groups' order (segments, then unions)."""
+    return tuple(
         SegmentReport(members[0], len(groups[members]), np.nan, np.nan, merged_with=members[1:])
         if members not in fits
         else SegmentReport(
             members[0],
             len(groups[members]),
-            fits[members][0],
-            float(fits[members][1].rms.min()),
-            float(excess[members]),
-            consistent[members],
+            fits[members].spread,
+            float(fits[members].result.rms.min()),
+            float(evidence.excess[members]),
+            evidence.consistent[members],
             merged_with=members[1:],
         )
         for members in groups
-    )
-    candidates = [members for members in fits if consistent[members]]
-    if selection == "paper" or not candidates:
-        # With every segment inconsistent the shape says nothing about which one is the target.
-        chosen = min(fits, key=lambda members: fits[members][0])
-    else:
-        # All criteria as log-scores: half the shape statistic is a log-likelihood ratio, the
-        # log makes the variance scale-free, so a factor in spread trades against a factor in
-        # likelihood, and the outline's SSE over the known noise is its own negative log
-        # likelihood. The last is what rejects a scattered cloud: the relative test pools its
-        # noise over the segments, so a cloud no model fits inflates the pool and passes, and
-        # a small circle slid into it converges to one place (a low spread). It also keeps a
-        # union honest: joining a segment the outline cannot also explain costs its misfit.
-        # The shape evidence is capped where the gate is (see the docstring, step 3).
-        # The variance is floored to keep a degenerate spread from being -inf.
-        chosen = min(
-            candidates,
-            key=lambda members: (
-                0.5 * max(excess[members], -shape_threshold)
-                + np.log(max(fits[members][0], 1e-12))
-                + 0.5 * fits[members][3][0] / noise_variance
-            ),
-        )
-    _, result, height, _ = fits[chosen]
-    scores = np.zeros(n_restarts)
-    if penetration is not None and configs is not None:
-
-        def penetrating(selected, tolerance):
-            return restart_penetration(
-                penetration, result.poses, fill, height, configs[selected], config_rotation,
-                tolerance,
-            )  # fmt: skip
-
-        touched = None if point_steps is None else point_steps[np.isin(labels, chosen)]
-        window = penetration_window(len(configs), penetration_configs, touched)
-        scores = penetrating(window, penetration_tolerance)
-        if touch_tolerance is not None and touched is not None:
-            # Points sensed after the last config passed belong to it (as in the window).
-            earlier = np.unique(np.minimum(touched, len(configs) - 1))
-            earlier = earlier[earlier < window.start]
-            scores = scores + penetrating(earlier, max(touch_tolerance, penetration_tolerance))
-    # Exact ties are the common case (several restarts with no penetration at all); the small
-    # absolute slack only absorbs summation round-off.
-    tied = np.flatnonzero(scores <= scores.min() + 1e-12)
-    best = tied[np.argmin(result.rms[tied])]
-    x, y, yaw = result.poses[best]
-    return TargetPoseEstimate(
-        x=float(x),
-        y=float(y),
-        yaw=float(yaw),
-        segment=max(chosen, key=lambda label: (int(np.sum(labels == label)), -label)),
-        members=chosen,
-        rms=float(result.rms[best]),
-        penetration=float(scores[best]),
-        restarts=result.poses.copy(),
-        segments=tuple(r for r in reports if not r.merged_with),
-        unions=tuple(r for r in reports if r.merged_with),
-        labels=labels,
     )

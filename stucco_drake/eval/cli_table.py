@@ -20,6 +20,13 @@ import yaml
 
 from stucco_drake.core.baselines import TRACKER_NAMES
 from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
+from stucco_drake.core.inputs import (
+    InputError,
+    non_negative_int,
+    positive_int,
+    prepare_output_folder,
+    read_stucco_params,
+)
 from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.replay import replay
@@ -28,13 +35,6 @@ from stucco_drake.eval.runner import Progress, RunInterrupted, make_executor, ru
 from stucco_drake.eval.sets import describe_sets
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
 from stucco_drake.eval.table import plot_fmi_ce, write_table
-from stucco_drake.inputs import (
-    InputError,
-    non_negative_int,
-    positive_int,
-    prepare_output_folder,
-    read_stucco_params,
-)
 
 Sources = Mapping[str, EpisodeSource]
 

@@ -44,6 +44,7 @@ from pydrake.systems.primitives import MatrixGain
 from stucco_drake.robot.models import add_iiwa14_with_bubble_gripper, configure_parser
 from stucco_drake.scenes.meshcat_session import show_over_the_shoulder
 from stucco_drake.scenes.primitives import add_primitive
+from stucco_drake.scenes.robot_selectors import actuation_selector, robot_joints, state_selector
 from stucco_drake.scenes.scene_file import ControlParams, Primitive, SceneFile, SceneFileError
 from stucco_drake.systems.planar_controller import (
     ArmKinematics,
@@ -176,56 +177,13 @@ def _override_friction(plant: MultibodyPlant, scene_graph, scene: SceneFile) -> 
                 scene_graph.AssignRole(plant.get_source_id(), gid, properties, RoleAssign.kReplace)
 
 
-def _robot_joints(plant: MultibodyPlant):
-    names = (IIWA, GRIPPER)
-    instances = [plant.GetModelInstanceByName(n) for n in names]
-    joints = []
-    for instance in instances:
-        for index in plant.GetJointIndices(instance):
-            joint = plant.get_joint(index)
-            if joint.num_velocities() > 0:
-                joints.append(joint)
-    return joints
-
-
-def _state_selector(plant: MultibodyPlant, robot_plant: MultibodyPlant) -> np.ndarray:
-    """S with x_robot = S x_plant, matching joints by model instance and name."""
-    S = np.zeros((robot_plant.num_multibody_states(), plant.num_multibody_states()))
-    nq_r, nq = robot_plant.num_positions(), plant.num_positions()
-    for rj in _robot_joints(robot_plant):
-        name = robot_plant.GetModelInstanceName(rj.model_instance())
-        instance = plant.GetModelInstanceByName(name)
-        sj = plant.GetJointByName(rj.name(), instance)
-        for i in range(rj.num_positions()):
-            S[rj.position_start() + i, sj.position_start() + i] = 1.0
-        for i in range(rj.num_velocities()):
-            S[nq_r + rj.velocity_start() + i, nq + sj.velocity_start() + i] = 1.0
-    return S
-
-
-def _actuation_selector(plant: MultibodyPlant, robot_plant: MultibodyPlant) -> np.ndarray:
-    """B with u_plant = B tau_robot: each actuator takes its joint's generalized force."""
-    B = np.zeros((plant.num_actuated_dofs(), robot_plant.num_velocities()))
-    for index in plant.GetJointActuatorIndices():
-        actuator = plant.get_joint_actuator(index)
-        joint = actuator.joint()
-        instance = robot_plant.GetModelInstanceByName(
-            plant.GetModelInstanceName(joint.model_instance())
-        )
-        rj = robot_plant.GetJointByName(joint.name(), instance)
-        B[actuator.input_start(), rj.velocity_start()] = 1.0
-    if np.linalg.matrix_rank(B) != robot_plant.num_velocities():
-        raise ValueError("every robot joint must have an actuator")
-    return B
-
-
 def _start_positions(robot_plant: MultibodyPlant, scene: SceneFile):
     """(hold, q_start, q_arm): robot positions with the fingers at their held opening, the same
     with the arm solved by IK for the gripper's start pose, and those arm positions (rad)."""
     start = scene.gripper_start
     arm = robot_plant.GetModelInstanceByName(IIWA)
     hold = robot_plant.GetPositions(robot_plant.CreateDefaultContext())
-    for joint in _robot_joints(robot_plant):
+    for joint in robot_joints(robot_plant, (IIWA, GRIPPER)):
         if joint.model_instance() != arm:
             first = joint.position_start()
             hold[first:first + joint.num_positions()] = start.finger_position
@@ -261,73 +219,19 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
     the exported ``desired_state`` is then that port.
     """
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(scene.plant, builder)
-    _add_robot(plant, scene)
-    parser = configure_parser(Parser(plant))
-    ProcessModelDirectives(ModelDirectives(directives=scene.directives), plant, parser)
-    column = pedestal(scene)
-    for primitive in scene.primitives + ([column] if column else []):
-        add_primitive(plant, primitive)
-    _override_friction(plant, scene_graph, scene)
-    plant.Finalize()
-    _filter_base_wrist_contact(plant, scene_graph)
-
+    plant, scene_graph = _add_plant(builder, scene)
     robot_plant = make_robot_plant(scene)
-    arm = robot_plant.GetModelInstanceByName(IIWA)
-    frame_r = robot_plant.GetFrameByName(
-        "gripper_frame", robot_plant.GetModelInstanceByName(GRIPPER)
-    )
-    start, control = scene.gripper_start, scene.control
     hold, q_start, q_arm = _start_positions(robot_plant, scene)
-    robot_plant.SetDefaultPositions(q_start)
-
-    # The objects' default poses come from the directives; the robot's from the start IK.
-    for name in (IIWA, GRIPPER):
-        q_instance = robot_plant.GetPositionsFromArray(
-            robot_plant.GetModelInstanceByName(name), q_start
-        )
-        plant.SetDefaultPositions(plant.GetModelInstanceByName(name), q_instance)
-
-    S = _state_selector(plant, robot_plant)
-
-    select_state = builder.AddNamedSystem("robot_state_selector", MatrixGain(S))
-    builder.Connect(plant.get_state_output_port(), select_state.get_input_port())
-    kp, ki, kd = _joint_gains(robot_plant, arm, control)
-    idc = builder.AddNamedSystem("joint_controller", InverseDynamicsController(
-        robot_plant, kp, ki, kd, False
-    ))
-    B = _actuation_selector(plant, robot_plant)
-    to_actuation = builder.AddNamedSystem("to_actuation", MatrixGain(B))
-    # The torque as the plant applies it (its net actuation), back in robot order.
-    from_actuation = builder.AddNamedSystem("applied_torque", MatrixGain(B.T))
-    builder.Connect(plant.get_net_actuation_output_port(), from_actuation.get_input_port())
-    builder.Connect(select_state.get_output_port(), idc.get_input_port_estimated_state())
-    builder.Connect(idc.get_output_port_control(), to_actuation.get_input_port())
-    builder.Connect(to_actuation.get_output_port(), plant.get_actuation_input_port())
-
-    ctrl = builder.AddNamedSystem("planar_controller", PlanarEndEffectorController(
-        robot_plant, arm, frame_r, height=start.height, yaw=start.yaw, q_start=q_arm,
-        q_nominal=q_arm, hold_positions=hold, start_xy=start.xy,
-        period=control.ik_period, action_duration=scene.action_duration,
-        move_fraction=control.move_fraction, gain=control.ik_gain, max_step=control.max_step,
-        max_push_force=control.max_push_force, joint_kp=control.kp,
-    ))
+    _set_start_positions(plant, robot_plant, q_start)
+    select_state, idc, from_actuation = _add_joint_control(builder, plant, robot_plant,
+                                                           scene.control)  # fmt: skip
+    ctrl = _add_planar_controller(builder, robot_plant, scene, hold, q_arm)
     builder.Connect(select_state.get_output_port(), ctrl.GetInputPort("robot_state"))
     desired = ctrl.GetOutputPort("desired_state")
     if command_hook is not None:
         desired = command_hook(builder, desired, select_state.get_output_port())
     builder.Connect(desired, idc.get_input_port_desired_state())
-
-    sequence = None
-    if external_actions:
-        builder.ExportInput(ctrl.GetInputPort("planar_step"), "planar_step")
-    else:
-        steps = np.clip(np.asarray(scene.actions, dtype=float).reshape(-1, 2), -1, 1)
-        sequence = builder.AddNamedSystem(
-            "action_sequence", PlanarActionSequence(steps * control.max_step, scene.action_duration)
-        )
-        builder.Connect(sequence.GetOutputPort("planar_step"), ctrl.GetInputPort("planar_step"))
-        builder.ExportOutput(sequence.GetOutputPort("action_index"), "action_index")
+    sequence = _add_actions(builder, scene, ctrl, external_actions)
 
     builder.ExportOutput(select_state.get_output_port(), "robot_state")
     builder.ExportOutput(from_actuation.get_output_port(), "applied_torque")
@@ -348,6 +252,93 @@ def build_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = Fals
     if meshcat is not None:
         show_over_the_shoulder(meshcat, built)
     return built
+
+
+def _add_plant(builder: DiagramBuilder, scene: SceneFile):
+    """(plant, scene_graph): the finalized simulation plant of the robot, the scene's models
+    and primitives (and the pedestal of a raised base), with the scene's friction."""
+    plant, scene_graph = AddMultibodyPlant(scene.plant, builder)
+    _add_robot(plant, scene)
+    parser = configure_parser(Parser(plant))
+    ProcessModelDirectives(ModelDirectives(directives=scene.directives), plant, parser)
+    column = pedestal(scene)
+    for primitive in scene.primitives + ([column] if column else []):
+        add_primitive(plant, primitive)
+    _override_friction(plant, scene_graph, scene)
+    plant.Finalize()
+    _filter_base_wrist_contact(plant, scene_graph)
+    return plant, scene_graph
+
+
+def _set_start_positions(plant: MultibodyPlant, robot_plant: MultibodyPlant, q_start) -> None:
+    """Both plants' default robot positions at ``q_start`` (robot-plant ordering, rad and m)."""
+    robot_plant.SetDefaultPositions(q_start)
+    # The objects' default poses come from the directives; the robot's from the start IK.
+    for name in (IIWA, GRIPPER):
+        q_instance = robot_plant.GetPositionsFromArray(
+            robot_plant.GetModelInstanceByName(name), q_start
+        )
+        plant.SetDefaultPositions(plant.GetModelInstanceByName(name), q_instance)
+
+
+def _add_joint_control(builder: DiagramBuilder, plant: MultibodyPlant,
+                       robot_plant: MultibodyPlant, control: ControlParams):  # fmt: skip
+    """(select_state, idc, from_actuation): the robot's state taken out of the plant's, the
+    inverse-dynamics joint controller driving the plant's actuation, and the torque the
+    plant applies mapped back to robot order."""
+    S = state_selector(plant, robot_plant, (IIWA, GRIPPER))
+    select_state = builder.AddNamedSystem("robot_state_selector", MatrixGain(S))
+    builder.Connect(plant.get_state_output_port(), select_state.get_input_port())
+    arm = robot_plant.GetModelInstanceByName(IIWA)
+    kp, ki, kd = _joint_gains(robot_plant, arm, control)
+    idc = builder.AddNamedSystem("joint_controller", InverseDynamicsController(
+        robot_plant, kp, ki, kd, False
+    ))
+    B = actuation_selector(plant, robot_plant)
+    to_actuation = builder.AddNamedSystem("to_actuation", MatrixGain(B))
+    # The torque as the plant applies it (its net actuation), back in robot order.
+    from_actuation = builder.AddNamedSystem("applied_torque", MatrixGain(B.T))
+    builder.Connect(plant.get_net_actuation_output_port(), from_actuation.get_input_port())
+    builder.Connect(select_state.get_output_port(), idc.get_input_port_estimated_state())
+    builder.Connect(idc.get_output_port_control(), to_actuation.get_input_port())
+    builder.Connect(to_actuation.get_output_port(), plant.get_actuation_input_port())
+    return select_state, idc, from_actuation
+
+
+def _add_planar_controller(builder: DiagramBuilder, robot_plant: MultibodyPlant,
+                           scene: SceneFile, hold, q_arm):  # fmt: skip
+    """The planar IK moving the gripper frame at the start's height and yaw, from the arm's
+    start positions ``q_arm`` (rad) with the fingers held at ``hold``."""
+    start, control = scene.gripper_start, scene.control
+    arm = robot_plant.GetModelInstanceByName(IIWA)
+    frame_r = robot_plant.GetFrameByName(
+        "gripper_frame", robot_plant.GetModelInstanceByName(GRIPPER)
+    )
+    return builder.AddNamedSystem("planar_controller", PlanarEndEffectorController(
+        robot_plant, arm, frame_r, height=start.height, yaw=start.yaw, q_start=q_arm,
+        q_nominal=q_arm, hold_positions=hold, start_xy=start.xy,
+        period=control.ik_period, action_duration=scene.action_duration,
+        move_fraction=control.move_fraction, gain=control.ik_gain, max_step=control.max_step,
+        max_push_force=control.max_push_force, joint_kp=control.kp,
+    ))
+
+
+def _add_actions(builder: DiagramBuilder, scene: SceneFile, ctrl,
+                 external_actions: bool) -> PlanarActionSequence | None:  # fmt: skip
+    """The source of the controller's planar steps: the exported ``planar_step`` input with
+    ``external_actions`` (None returned), else the sequence playing ``scene.actions`` (scaled
+    by ``max_step``, m) and its exported ``action_index``."""
+    if external_actions:
+        builder.ExportInput(ctrl.GetInputPort("planar_step"), "planar_step")
+        return None
+    steps = np.clip(np.asarray(scene.actions, dtype=float).reshape(-1, 2), -1, 1)
+    sequence = builder.AddNamedSystem(
+        "action_sequence",
+        PlanarActionSequence(steps * scene.control.max_step, scene.action_duration),
+    )
+    builder.Connect(sequence.GetOutputPort("planar_step"), ctrl.GetInputPort("planar_step"))
+    builder.ExportOutput(sequence.GetOutputPort("action_index"), "action_index")
+    return sequence
 
 
 def _object_bodies(plant: MultibodyPlant):

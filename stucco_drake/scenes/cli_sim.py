@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from stucco_drake.inputs import positive_int, prepare_output_file
+from stucco_drake.core.inputs import positive_int, prepare_output_file
 
 
 def add_sim_command(commands) -> None:

@@ -22,7 +22,7 @@ from pydrake.multibody.parsing import ModelDirective
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from stucco_drake.core import SoftTrackingParams
-from stucco_drake.inputs import InputError
+from stucco_drake.core.inputs import InputError
 from stucco_drake.robot.models import resolve_model_url
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from pydrake.common.yaml import yaml_dump_typed
 
-from stucco_drake.inputs import InputError
+from stucco_drake.core.inputs import InputError
 from stucco_drake.scenes.scene_file import SceneFile, SensorNoise, load_scene_text
 
 #: Joint-torque noise matching the free-space wrench noise the authors measured on their real

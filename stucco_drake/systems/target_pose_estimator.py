@@ -96,7 +96,7 @@ class TargetPoseEstimator(LeafSystem):
         check_period: how often (s) to look for a newly completed action.
         n_restarts: ICP restarts per segment.
         penetration_configs: which visited configs a restart may not penetrate (see
-            :func:`~stucco_drake.core.target_pose.estimate_target_pose`): ``"since_touch"``
+            :func:`~stucco_drake.core.segment_selection.restart_scores`): ``"since_touch"``
             (default; those since the chosen segment was last touched, because the target
             may have been pushed since the older ones), ``"all"`` (the authors' code) or
             ``"latest"`` (the paper's text).

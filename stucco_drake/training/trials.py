@@ -1,9 +1,9 @@
 """The tracking training set (paper Sec. V-B): closed-loop trials in the SELECT scenes.
 
 A trial draws a start and a goal for the gripper in the scene's reach, then drives the BOR
-Diagram (:func:`~stucco_drake.bor.build_bor_diagram` with ``external_actions``) one action at
-a time: greedily towards the goal, and after every action the contact detector judged in
-contact, a random walk of :data:`WALK_LENGTH` uniform actions (restarted by each new contact),
+Diagram (:func:`~stucco_drake.bor.diagram.build_bor_diagram` with ``external_actions``) one
+action at a time: greedily towards the goal, and after every action the contact detector judged
+in contact, a random walk of :data:`WALK_LENGTH` uniform actions (restarted by each new contact),
 until the gripper is within :data:`DIST_FOR_DONE` of the goal or :data:`MAX_ACTIONS` actions
 are played. :func:`record_trial` logs it as an :class:`~stucco_drake.eval.episode_log.EpisodeLog`
 (the same recorder as the BOR episodes); a trial in contact during fewer than
@@ -250,28 +250,67 @@ def record_trial(
     """
     base = load_scene(scene) if isinstance(scene, str) else scene
     plan_rng, walk_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(2))
+    plan, scene, bor = _reachable_trial(base, plan_rng, plan, method, seed)
+    policy = GreedyRandomWalkPolicy(scene, plan.goal, walk_rng)
+    played = _play_trial(bor, scene, plan, policy, max_actions)
+    log = played.recorder.log(base.name, seed, 0.0, {
+        "wall_time_s": float(played.wall),
+        "trial": {
+            "start": list(plan.start), "goal": list(plan.goal), "reached_goal": played.reached,
+            "actions": played.actions, "detector_in_contact": played.verdicts,
+        },
+    })  # fmt: skip
+    reason = discard_reason(log)
+    log.info["contact_fraction"] = contact_fraction(log)
+    log.info["discarded"] = bool(reason)
+    log.info["discard_reason"] = reason
+    return log
+
+
+def _reachable_trial(base: SceneFile, plan_rng: np.random.Generator, plan: TrialPlan | None,
+                     method: str, seed: int):  # fmt: skip
+    """(plan, scene, bor): the trial's plan (``plan``, or drawn from ``plan_rng`` until the
+    arm can reach its start, at most :data:`_START_DRAWS` times), ``base`` with the gripper
+    starting there and a target (:func:`with_target`), and its BOR Diagram with external
+    actions. StartUnreachable for a given ``plan`` the arm cannot reach."""
     drawn = plan is None
     for _ in range(_START_DRAWS):
         plan = plan_trial(base, plan_rng) if drawn else plan
         start = dataclasses.replace(base.gripper_start, xy=list(plan.start))
         scene = with_target(dataclasses.replace(base, gripper_start=start, actions=[]))
         try:
-            bor = build_bor_diagram(scene, method, seed, external_actions=True)
-            break
+            return plan, scene, build_bor_diagram(scene, method, seed, external_actions=True)
         except StartUnreachable:
             # Within reach by distance, but a joint limit forbids it (joint 1 stops at 170
             # degrees, so straight behind the base is out): draw again from the same generator.
             if not drawn:
                 raise
-    else:
-        raise RuntimeError(f"{base.name}: no reachable start in {_START_DRAWS} draws")
+    raise RuntimeError(f"{base.name}: no reachable start in {_START_DRAWS} draws")
+
+
+@dataclasses.dataclass
+class _PlayedTrial:
+    """A played trial: its recorder, the normalized actions played, the detector's contact
+    verdict on each, whether the goal was reached and the wall time (s) of the actions."""
+
+    recorder: EpisodeRecorder
+    actions: list
+    verdicts: list
+    reached: bool
+    wall: float
+
+
+def _play_trial(bor, scene: SceneFile, plan: TrialPlan, policy: GreedyRandomWalkPolicy,
+                max_actions: int) -> _PlayedTrial:  # fmt: skip
+    """Simulates ``bor`` action by action, each chosen by ``policy`` from the gripper's
+    position (m, world) and the detector's verdict on the action before, until the gripper
+    is within :data:`DIST_FOR_DONE` of the goal or ``max_actions`` were played."""
     simulator = make_bor_simulator(bor)
     context = simulator.get_mutable_context()
     recorder = EpisodeRecorder(bor, context)
     plant_context = bor.scene.plant.GetMyContextFromRoot(context)
     detector_context = bor.detector.GetMyContextFromRoot(context)
     step_port = bor.diagram.GetInputPort("planar_step")
-    policy = GreedyRandomWalkPolicy(scene, plan.goal, walk_rng)
     max_step, duration = float(scene.control.max_step), float(scene.action_duration)
 
     def gripper_xy() -> np.ndarray:
@@ -301,20 +340,7 @@ def record_trial(
         recorder.on_action(k, contacts)
         if reached:
             break
-    wall = time.perf_counter() - wall
-
-    log = recorder.log(base.name, seed, 0.0, {
-        "wall_time_s": float(wall),
-        "trial": {
-            "start": list(plan.start), "goal": list(plan.goal), "reached_goal": reached,
-            "actions": actions, "detector_in_contact": verdicts,
-        },
-    })  # fmt: skip
-    reason = discard_reason(log)
-    log.info["contact_fraction"] = contact_fraction(log)
-    log.info["discarded"] = bool(reason)
-    log.info["discard_reason"] = reason
-    return log
+    return _PlayedTrial(recorder, actions, verdicts, reached, time.perf_counter() - wall)
 
 
 def is_discarded(log: EpisodeLog) -> bool:

@@ -1,5 +1,10 @@
 """The ``stucco-drake`` command line."""
 
+# The top of the package: ``main`` gathers every command. The layers' own commands live with
+# their layer (``bor/cli.py``: run, diagram; ``scenes/cli_sim.py``: sim; ``eval/cli_table.py``:
+# table); those that combine layers live here (``scenes``, ``estimates``, ``sweep``).
+# ``python -m stucco_drake.cli`` runs ``main`` (``__main__.py``).
+
 from __future__ import annotations
 
 import argparse
@@ -10,13 +15,13 @@ import numpy as np
 
 from stucco_drake.bor.cli import add_diagram_command, add_run_command
 from stucco_drake.bor.log import BOR_SOURCES, table_scenes
-from stucco_drake.estimates_cli import add_estimates_command
+from stucco_drake.cli.estimates import add_estimates_command
+from stucco_drake.cli.scenes import add_scenes_command
+from stucco_drake.cli.sweep import add_sweep_command
+from stucco_drake.core.inputs import InputError, non_negative_int
 from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES
-from stucco_drake.inputs import InputError, non_negative_int
 from stucco_drake.scenes.cli_sim import add_sim_command
-from stucco_drake.scenes_cli import add_scenes_command
-from stucco_drake.sweep_cli import add_sweep_command
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -89,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
 
     Every bad input is reported before any simulation starts, in one line: argparse's checks
     by :class:`OneLineErrorParser` (it exits), the commands' own checks (scene files,
-    parameter files, output paths, ...) as an :class:`~stucco_drake.inputs.InputError` here.
+    parameter files, output paths, ...) as an :class:`~stucco_drake.core.inputs.InputError` here.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -100,6 +105,3 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{parser.prog} {args.command}: error: {message}", file=sys.stderr)
         return 2
 
-
-if __name__ == "__main__":
-    sys.exit(main())

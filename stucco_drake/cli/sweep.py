@@ -13,12 +13,12 @@ from collections.abc import Mapping
 
 from stucco_drake.core.baselines import TRACKER_NAMES
 from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
+from stucco_drake.core.inputs import InputError, positive_int, prepare_output_folder
 from stucco_drake.eval.cli_table import check_names
 from stucco_drake.eval.results import RunResults
 from stucco_drake.eval.runner import RunInterrupted, make_executor
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES, EpisodeSource
 from stucco_drake.eval.sweep import AMBIGUOUS, parse_grid, run_sweep, tuned_path
-from stucco_drake.inputs import InputError, positive_int, prepare_output_folder
 from stucco_drake.training import TRAINING_SCENES, TRAINING_SOURCES
 
 SWEEP_SOURCES = {**TRAINING_SOURCES, **SYNTHETIC_SOURCES}

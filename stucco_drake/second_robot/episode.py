@@ -1,6 +1,6 @@
 """The contact-tracking chain on a second robot: the SCARA probe arm pushing three boxes.
 
-:func:`run_second_robot` wires :func:`~stucco_drake.contact_tracking.add_contact_tracking`
+:func:`run_second_robot` wires :func:`~stucco_drake.tracking.add_contact_tracking`
 (the chain our BOR Diagram uses, unchanged) around the probe station of
 :mod:`stucco_drake.scenes.probe_station`, with the probe's own surface samples (CPF), pxpen
 grid and free-space statistics, plays the prescribed pushes and scores the chain against the
@@ -38,7 +38,6 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
-from stucco_drake.contact_tracking import add_contact_tracking
 from stucco_drake.core.metrics import contact_error, fowlkes_mallows
 from stucco_drake.core.params import SoftTrackingParams
 from stucco_drake.core.shapes import BoxSdf
@@ -62,6 +61,7 @@ from stucco_drake.systems.contact_truth import (
     RobotObjectContacts,
 )
 from stucco_drake.systems.observed_robot import ObservedRobot
+from stucco_drake.tracking import add_contact_tracking
 
 #: A true contact step: the strongest probe-object force is at least this (N). The isolator
 #: ignores wrench forces under 1 N (``ContactIsolator.min_force``), so weaker ones are not

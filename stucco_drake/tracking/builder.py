@@ -140,30 +140,12 @@ def add_contact_tracking(
     _check_arguments(penetration, truth, truth_state)
     h = float(time_step)
     joint_state, joint_torque = _observed_joints(builder, robot, robot_state, applied_torque)
-    estimator = builder.AddNamedSystem(
-        "wrench_estimator", ExternalWrenchEstimator(h, robot, **(estimator_kwargs or {})))
-    builder.Connect(joint_state, estimator.GetInputPort("state"))
-    builder.Connect(joint_torque, estimator.GetInputPort("applied_torque"))
-    detector = builder.AddNamedSystem("contact_detector", ContactDetector(
-        h, default_threshold() if threshold is None else threshold))  # fmt: skip
-    for name in ("residual_chi2", "ee_position"):
-        builder.Connect(estimator.GetOutputPort(name), detector.GetInputPort(name))
-    builder.Connect(action_index, detector.GetInputPort("action_index"))
-    # Its own context on the same robot plant: the pose may be evaluated at any time.
-    pose = builder.AddNamedSystem("gripper_pose", GripperPoseFromState(ObservedRobot(
-        robot.plant, robot.frame, joints=robot.joints, positions=robot.positions)))
-    builder.Connect(joint_state, pose.GetInputPort("state"))
+    estimator, detector, pose = _add_proprioception(
+        builder, h, robot, joint_state, joint_torque, action_index, estimator_kwargs, threshold)
     bubbles = _add_tactile(builder, h, tactile)
     isolator = _add_isolator(builder, h, cpf_seed, isolator_kwargs, estimator, pose, detector,
                              bubbles)  # fmt: skip
-    assembler = builder.AddNamedSystem("action_contacts", ActionContactsAssembler(h, truth=truth))
-    if truth is not None:
-        builder.Connect(truth_state, assembler.GetInputPort("truth_state"))
-    for name in ("current_action", "completed_action"):
-        builder.Connect(detector.GetOutputPort(name), assembler.GetInputPort(name))
-    for name in ("has_contact", "contact_points"):
-        builder.Connect(isolator.GetOutputPort(name), assembler.GetInputPort(name))
-    builder.Connect(pose.GetOutputPort("gripper_pose"), assembler.GetInputPort("gripper_pose"))
+    assembler = _add_assembler(builder, h, detector, isolator, pose, truth, truth_state)
     tracking, target = _add_tracking(builder, h, assembler, tracker, tracker_seed, penetration,
                                      target_shape, icp_seed, dx_model)  # fmt: skip
     chain = ContactTracking(estimator, detector, pose, bubbles, isolator, assembler, tracking,
@@ -181,6 +163,40 @@ def _check_arguments(penetration, truth, truth_state) -> None:
                          "(RobotPenetration): the target pose estimator reads its grid")
     if (truth is None) != (truth_state is None):
         raise ValueError("add_contact_tracking: truth and truth_state go together")
+
+
+def _add_proprioception(builder, h, robot: ObservedRobot, joint_state, joint_torque,
+                        action_index, estimator_kwargs, threshold):  # fmt: skip
+    """The momentum observer, the chi-square detector (on the action clock ``action_index``)
+    and the gripper pose, all from the observed joints' state and torques."""
+    estimator = builder.AddNamedSystem(
+        "wrench_estimator", ExternalWrenchEstimator(h, robot, **(estimator_kwargs or {})))
+    builder.Connect(joint_state, estimator.GetInputPort("state"))
+    builder.Connect(joint_torque, estimator.GetInputPort("applied_torque"))
+    detector = builder.AddNamedSystem("contact_detector", ContactDetector(
+        h, default_threshold() if threshold is None else threshold))  # fmt: skip
+    for name in ("residual_chi2", "ee_position"):
+        builder.Connect(estimator.GetOutputPort(name), detector.GetInputPort(name))
+    builder.Connect(action_index, detector.GetInputPort("action_index"))
+    # Its own context on the same robot plant: the pose may be evaluated at any time.
+    pose = builder.AddNamedSystem("gripper_pose", GripperPoseFromState(ObservedRobot(
+        robot.plant, robot.frame, joints=robot.joints, positions=robot.positions)))
+    builder.Connect(joint_state, pose.GetInputPort("state"))
+    return estimator, detector, pose
+
+
+def _add_assembler(builder, h, detector, isolator, pose, truth, truth_state):
+    """The per-action contact assembler: the detector's actions, the isolator's points, the
+    gripper pose and, with ``truth``, the state its labeller reads."""
+    assembler = builder.AddNamedSystem("action_contacts", ActionContactsAssembler(h, truth=truth))
+    if truth is not None:
+        builder.Connect(truth_state, assembler.GetInputPort("truth_state"))
+    for name in ("current_action", "completed_action"):
+        builder.Connect(detector.GetOutputPort(name), assembler.GetInputPort(name))
+    for name in ("has_contact", "contact_points"):
+        builder.Connect(isolator.GetOutputPort(name), assembler.GetInputPort(name))
+    builder.Connect(pose.GetOutputPort("gripper_pose"), assembler.GetInputPort("gripper_pose"))
+    return assembler
 
 
 def _add_isolator(builder, h, cpf_seed, isolator_kwargs, estimator, pose, detector, bubbles):

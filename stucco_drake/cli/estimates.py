@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from stucco_drake.inputs import InputError
+from stucco_drake.core.inputs import InputError
 
 #: Outline error (m) under which an estimate is counted as near the truth in the summary.
 NEAR = 0.02

@@ -68,7 +68,7 @@ def pin() -> str:
 
 def status() -> str:
     """'pinned', or 'native (why)': whether seeded runs here match other machines bit for bit."""
-    return _STATE or "native (stucco_drake.kernels.pin was not called)"
+    return _STATE or "native (stucco_drake.runtime.kernels.pin was not called)"
 
 
 _STATE: str | None = None
