@@ -24,7 +24,7 @@ system-deps:
 	  $(SUDO) apt-get update -q && $(SUDO) apt-get install -y -q chromium graphviz; }
 
 test: $(STAMP) system-deps
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto
 
 # Blind Object Retrieval on scene FB end to end at Table II's setting (contact motion, STUCCO's
 # parameters): rummage, track, estimate, grasp; writes a standalone Meshcat recording and a
