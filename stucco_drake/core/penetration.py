@@ -6,14 +6,10 @@ import math
 
 import numpy as np
 
+from stucco_drake.core.cell_pairs import CellPairs, candidate_pairs, quantise
 from stucco_drake.core.deep_region import deep_region
 from stucco_drake.core.sdf import GridSdf
 from stucco_drake.core.state_pairs import ordered_sums, penetrating_entries
-
-#: Integer grid coordinates use int16 while every coordinate stays within this many cells.
-_INT16_LIMIT = 16000
-#: Stand-in coordinate of a skipped config: every difference with it falls outside the grid.
-_SKIP = 16383
 
 
 def _in_frame(rotation: np.ndarray, array: np.ndarray) -> np.ndarray:
@@ -185,37 +181,6 @@ class RobotPenetration:
                 self._crops[key] = (lo, values, level)
         return self._crops[key]
 
-    def _quantise(self, coordinates, offset, skip_nan: bool):
-        """Round (3, ...) positions to grid cells, minus ``offset`` cells per axis."""
-        h = self.robot_sdf.resolution
-        scaled = coordinates / np.float32(h) - offset.reshape(3, *([1] * (coordinates.ndim - 1)))
-        nan = np.isnan(scaled) if skip_nan else None
-        if nan is not None and nan.any():
-            scaled = np.where(nan, _SKIP, scaled)
-        return np.rint(scaled)
-
-    @staticmethod
-    def _candidate_pairs(point_cells, config_cells, extent):
-        """(config, point) index pairs that fall in the crop box in at least one particle.
-
-        A contact's point and config take a few distinct positions across particles, so the
-        box test on their ranges over all particles (n_configs x n_points work) discards most
-        pairs before the per-particle test (n_particles x pairs work). Conservative: a pair
-        kept here may still be culled per particle. Skipped configs have huge coordinates, so a
-        config skipped in every particle never passes.
-        """
-        possible = None
-        for axis in range(3):
-            points = point_cells[axis].astype(np.int32)
-            configs = config_cells[axis].astype(np.int32)
-            # Some particle has 0 <= point - config < extent only if the ranges allow it.
-            upper = points.max(axis=0)[None, :] - configs.min(axis=0)[:, None] >= 0
-            lower = points.min(axis=0)[None, :] - configs.max(axis=0)[:, None] < extent[axis]
-            axis_possible = upper & lower
-            possible = axis_possible if possible is None else possible & axis_possible
-        config_index, point_index = np.nonzero(possible)
-        return config_index, point_index
-
     @staticmethod
     def _distinct_states(coordinates):
         """Group equal columns entries across particles: (state ids, representatives) or None.
@@ -265,9 +230,9 @@ class RobotPenetration:
         grid = self.robot_sdf
         origin_cells = grid.lower / grid.resolution
         crop_lo, crop_values, _ = crop
-        config_of_pair, point_of_pair = self._candidate_pairs(
-            self._quantise(points_e, origin_cells + crop_lo, skip_nan=False),
-            self._quantise(configs_e, np.zeros(3), skip_nan=True),
+        config_of_pair, point_of_pair = candidate_pairs(
+            quantise(points_e, grid.resolution, origin_cells + crop_lo, skip_nan=False),
+            quantise(configs_e, grid.resolution, np.zeros(3), skip_nan=True),
             np.array(crop_values.shape),
         )
         combos = c_counts[config_of_pair] * p_counts[point_of_pair]
@@ -321,92 +286,80 @@ class RobotPenetration:
             max(0, depth - tolerance) over all (config, point) pairs.
 
         Every pair is first culled on integer grid coordinates (one subtraction and one unsigned
-        comparison per axis), then screened by the nearest node's value, and only the few pairs
-        left are interpolated exactly. Work runs in blocks of about ``pair_budget`` pairs.
+        comparison per axis, :mod:`~stucco_drake.core.cell_pairs`), then screened by the nearest
+        node's value, and only the few pairs left are interpolated exactly. Work runs in blocks
+        of about ``pair_budget`` pairs.
         """
         _, n_particles, n_points = points_e.shape
-        n_configs = configs_e.shape[2]
         per_particle = np.zeros(n_particles)
         per_point = np.zeros((n_particles, n_points))
         crop = self._crop(tolerance)
-        if n_points == 0 or n_configs == 0 or crop is None:
+        if n_points == 0 or configs_e.shape[2] == 0 or crop is None:
             return per_particle, per_point
-        crop_lo, crop_values, level = crop
-        extent = np.array(crop_values.shape)
-        grid = self.robot_sdf
         # Grouping hashes every point: it pays off only against more than a few configs.
-        if self.deduplicate and configs_e.shape[1] > 1 and n_configs >= 8:
+        if self.deduplicate and configs_e.shape[1] > 1 and configs_e.shape[2] >= 8:
             sums = self._deduplicated_sums(points_e, configs_e, tolerance, crop)
             if sums is not None:
                 return sums
-        origin_cells = grid.lower / grid.resolution
-        point_cells = self._quantise(points_e, origin_cells + crop_lo, skip_nan=False)
-        config_cells = self._quantise(configs_e, np.zeros(3), skip_nan=True)
-        small = max(np.abs(point_cells).max(), np.abs(config_cells).max()) <= _INT16_LIMIT
-        itype, utype = (np.int16, np.uint16) if small else (np.int32, np.uint32)
-        if not small:
-            config_cells = np.where(config_cells == _SKIP, 1 << 30, config_cells)
-        point_cells = point_cells.astype(itype)
-        config_cells = config_cells.astype(itype)
-        shared_configs = configs_e.shape[1] == 1
-        config_of_pair, point_of_pair = self._candidate_pairs(point_cells, config_cells, extent)
-        n_pairs = config_of_pair.size
-        if n_pairs == 0:
+        crop_lo, crop_values, _ = crop
+        pairs = CellPairs.build(points_e, configs_e, self.robot_sdf, crop_lo,
+                                np.array(crop_values.shape))  # fmt: skip
+        if pairs is None:
             return per_particle, per_point
-        block = max(1, min(n_particles, self.pair_budget // n_pairs))
-        scratch = self._buffer(f"cells_{itype.__name__}", block * n_pairs, itype)
-        gathered = self._buffer(f"gathered_{itype.__name__}", 2 * block * n_pairs, itype)
-        mask = self._buffer("mask", block * n_pairs, np.bool_)
-        axis_mask = self._buffer("axis_mask", block * n_pairs, np.bool_)
-        strides = np.array([extent[1] * extent[2], extent[2], 1])
-        flat_values = crop_values.ravel()
-        inverse_h = np.float32(1.0 / grid.resolution)
-        origin_cells = origin_cells.astype(np.float32)
-        # Flat crop index of a pair = point's flat index - config's (both in cells): two gathers
-        # per surviving pair instead of six. Skipped configs only ever reach culled pairs.
-        point_nodes = np.tensordot(strides, point_cells.astype(np.int64), axes=1)
-        config_nodes = np.tensordot(strides, config_cells.astype(np.int64), axes=1)
+        block = max(1, min(n_particles, self.pair_budget // pairs.size))
+        work = self._cull_buffers(block * pairs.size, pairs.point_cells.dtype)
         for start in range(0, n_particles, block):  # blocks of particles, bounded memory
             stop = min(start + block, n_particles)
-            size = (stop - start) * n_pairs
-            config_rows = slice(0, 1) if shared_configs else slice(start, stop)
-            n_config_rows = 1 if shared_configs else stop - start
-            cells, inside, axis_inside = (b[:size].reshape(-1, n_pairs)
-                                          for b in (scratch, mask, axis_mask))
-            point_side = gathered[:size].reshape(-1, n_pairs)
-            config_side = gathered[size : size + n_config_rows * n_pairs].reshape(-1, n_pairs)
-            for axis in range(3):
-                np.take(point_cells[axis, start:stop], point_of_pair, axis=1, out=point_side)
-                np.take(config_cells[axis, config_rows], config_of_pair, axis=1, out=config_side)
-                np.subtract(point_side, config_side, out=cells)
-                # Negative differences wrap to large unsigned values: one test for 0 <= g < n.
-                np.less(cells.view(utype), extent[axis], out=inside if axis == 0 else axis_inside)
-                if axis:
-                    np.logical_and(inside, axis_inside, out=inside)
-            flat = np.flatnonzero(inside)
-            if flat.size == 0:
+            found = self._block_excess(points_e, configs_e, pairs, start, stop, work, crop,
+                                       tolerance)  # fmt: skip
+            if found is None:
                 continue
-            particle = flat // n_pairs
-            pair = flat - particle * n_pairs
-            config = config_of_pair[pair]
-            point = point_of_pair[pair]
-            rows = start + particle
-            config_particle = np.zeros_like(rows) if shared_configs else rows
-            node = point_nodes[rows, point] - config_nodes[config_particle, config]
-            near = flat_values[node] < level
-            if not near.any():
-                continue
-            particle, point, rows, config, config_particle = (
-                v[near] for v in (particle, point, rows, config, config_particle)
-            )
-            cells = [
-                (points_e[a, rows, point] - configs_e[a, config_particle, config]) * inverse_h
-                - origin_cells[a]
-                for a in range(3)
-            ]
-            excess = np.maximum(-grid.at_cell_coordinates(*cells) - tolerance, 0.0)
+            particle, point, excess = found
             per_particle[start:stop] += np.bincount(particle, excess, minlength=stop - start)
             per_point[start:stop] += np.bincount(
                 particle * n_points + point, excess, minlength=(stop - start) * n_points
             ).reshape(stop - start, n_points)
         return per_particle, per_point
+
+    def _cull_buffers(self, size: int, dtype) -> tuple[np.ndarray, ...]:
+        """Work arrays of :meth:`CellPairs.inside_crop` for ``size`` pairs of cells of type
+        ``dtype`` (reused across calls, see :meth:`_buffer`)."""
+        name = np.dtype(dtype).name
+        return (self._buffer(f"cells_{name}", size, dtype),
+                self._buffer(f"gathered_{name}", 2 * size, dtype),
+                self._buffer("mask", size, np.bool_),
+                self._buffer("axis_mask", size, np.bool_))  # fmt: skip
+
+    def _block_excess(self, points_e, configs_e, pairs: CellPairs, start: int, stop: int, work,
+                      crop, tolerance: float):  # fmt: skip
+        """The pairs of particles ``start:stop`` that may penetrate beyond ``tolerance`` (m):
+        ``(particle - start, point, excess)``, excess = max(0, depth - tolerance) (m), or None
+        when no pair comes near. Pairs inside the crop box are screened by their nearest node's
+        value (see :meth:`_crop`), and only the pairs left are interpolated exactly."""
+        flat = pairs.inside_crop(start, stop, *work)
+        if flat.size == 0:
+            return None
+        particle = flat // pairs.size
+        pair = flat - particle * pairs.size
+        config = pairs.config_of_pair[pair]
+        point = pairs.point_of_pair[pair]
+        rows = start + particle
+        config_particle = np.zeros_like(rows) if pairs.shared_configs else rows
+        _, crop_values, level = crop
+        node = pairs.point_nodes[rows, point] - pairs.config_nodes[config_particle, config]
+        near = crop_values.ravel()[node] < level
+        if not near.any():
+            return None
+        particle, point, rows, config, config_particle = (
+            v[near] for v in (particle, point, rows, config, config_particle)
+        )
+        grid = self.robot_sdf
+        inverse_h = np.float32(1.0 / grid.resolution)
+        origin_cells = (grid.lower / grid.resolution).astype(np.float32)
+        cells = [
+            (points_e[a, rows, point] - configs_e[a, config_particle, config]) * inverse_h
+            - origin_cells[a]
+            for a in range(3)
+        ]
+        excess = np.maximum(-grid.at_cell_coordinates(*cells) - tolerance, 0.0)
+        return particle, point, excess

@@ -38,61 +38,13 @@ from scipy.spatial import cKDTree
 
 from stucco_drake.core.free_space import SweptSlice, swept_configs
 from stucco_drake.core.grasp_choice import choose_grasp
+from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_penetration import sample_cross_section
 from stucco_drake.core.segment_extent import outline_extent, split_wider_segments, xy_extent
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.validation import as_finite_array
-
-
-@dataclasses.dataclass(frozen=True)
-class HypothesisParams:
-    """Settings of :func:`pose_hypotheses` (m unless noted).
-
-    Attributes:
-        contact_noise: standard deviation of a contact point about the touched surface.
-        other_object_cost: cost (negative log-likelihood, dimensionless) of a point lying on
-            another object; a point within ``contact_noise * sqrt(2 other_object_cost)`` of the
-            posed target's surface is cheaper on it (2.0: two standard deviations).
-        free_space_tolerance: penetration into the robot ignored per (config, point) pair.
-        free_space_scale: penetration beyond the tolerance costing one unit.
-        temperature: divides the costs before the weights are formed (dimensionless).
-        min_explained: fewest contact points the chosen pose must explain for any confidence.
-        n_restarts: ICP starts per proposal group.
-        outline_spacing: spacing of the outline points ICP fits.
-        fill_spacing: spacing of the cross-section points checked against free space, and
-            of the outline on which hypotheses are compared (closer ones count as one).
-        grid_spacing, grid_yaw: spacing (m, rad) of the grid of poses searched besides the
-            ICP proposals, over every placement that could touch a tracked point.
-        n_candidates: grid poses with the lowest contact cost kept as candidates.
-        n_polish: candidates (lowest full cost) refitted on the points each explains.
-        polish_iterations: refits of each (explain, fit, repeat).
-        sweep_spacing: spacing of the configs swept along a push that sensed nothing.
-        raster_resolution: cell size of the free-space slice.
-        grasp_margin, grasp_angle_margin: how much to spare (m, rad) a grasp needs to count
-            as closing under a hypothesis when the grasp is chosen and its confidence formed
-            (:func:`~stucco_drake.core.grasp_choice.choose_grasp`).
-    """
-
-    contact_noise: float = 0.004
-    other_object_cost: float = 2.0
-    free_space_tolerance: float = 0.002
-    free_space_scale: float = 0.002
-    temperature: float = 1.0
-    min_explained: int = 3
-    n_restarts: int = 20
-    outline_spacing: float = 0.002
-    fill_spacing: float = 0.005
-    grid_spacing: float = 0.01
-    grid_yaw: float = np.radians(5.0)
-    n_candidates: int = 300
-    n_polish: int = 30
-    polish_iterations: int = 5
-    sweep_spacing: float = 0.005
-    raster_resolution: float = 0.0025
-    grasp_margin: float = 0.01
-    grasp_angle_margin: float = np.radians(5.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -321,7 +273,7 @@ def _distinct(poses, shape, outline, resolution: float) -> np.ndarray:
 
 def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
                     *, spread=None, free_space: FreeSpace | None = None,
-                    params: HypothesisParams = HypothesisParams(),
+                    params: HypothesisParams | None = None,
                     ) -> PoseHypotheses | None:  # fmt: skip
     """Weighted target-pose hypotheses from tracked contact points (see the module).
 
@@ -333,7 +285,7 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
         spread: (n,) each point's spread over the tracker's particles (m; see
             :func:`point_spread`); None for none.
         free_space: where the robot has been (None: contact evidence only).
-        params: the settings.
+        params: the settings (None: the defaults).
 
     Returns:
         The hypotheses, or None when no placement of the target can touch ``min_explained``
@@ -342,6 +294,7 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     Raises:
         ValueError: naming the argument, e.g. no segment with ``min_explained`` points.
     """
+    params = params or HypothesisParams()
     found = search_hypotheses(rng, points, labels, shape, spread=spread, free_space=free_space,
                               params=params)  # fmt: skip
     return None if found is None else weigh_hypotheses(*found, shape, params)
@@ -349,10 +302,11 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
 
 def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
                       *, spread=None, free_space: FreeSpace | None = None,
-                      params: HypothesisParams = HypothesisParams()):  # fmt: skip
+                      params: HypothesisParams | None = None):  # fmt: skip
     """The poses :func:`pose_hypotheses` weighs, with their costs and the points each explains
     ((k, 3), (k,), (k, n)), before any is left out; None when no placement can touch
     ``min_explained`` points. Arguments and errors as :func:`pose_hypotheses`'s."""
+    params = params or HypothesisParams()
     points = as_finite_array(points, "points", (None, 3))
     labels = np.asarray(labels)
     if labels.shape != (len(points),) or not np.issubdtype(labels.dtype, np.integer):

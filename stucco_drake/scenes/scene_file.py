@@ -5,7 +5,7 @@ inline primitive boxes and cylinders), the retrieval target, where the robot sta
 gripper starts, the prescribed planar action sequence, the plant configuration, the joint-level
 control gains and the tracker parameters. It is read with pydrake's ``yaml_load_typed`` into
 :class:`SceneFile`; every error is re-raised as one :class:`SceneFileError` line naming the file
-and the offending key.
+and the offending key (its path: :func:`~stucco_drake.scenes.bad_yaml_key.locate_bad_key`).
 
 Units: metres, radians, seconds, kilograms. Poses are in the world frame (z up, the table top at
 z = 0).
@@ -16,7 +16,6 @@ import dataclasses
 import math
 from pathlib import Path
 
-import yaml
 from pydrake.common.yaml import yaml_load_typed
 from pydrake.multibody.parsing import ModelDirective
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -24,6 +23,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from stucco_drake.core import SoftTrackingParams
 from stucco_drake.core.inputs import InputError
 from stucco_drake.robot.models import resolve_model_url
+from stucco_drake.scenes.bad_yaml_key import locate_bad_key
 
 
 def _find_diagrams_dir() -> Path:
@@ -268,7 +268,7 @@ def load_scene_text(text: str, *, where: str = "<string>") -> SceneFile:
     try:
         scene = yaml_load_typed(schema=SceneFile, data=text)
     except Exception as error:  # yaml_load_typed raises several types without the key path
-        key = _locate_bad_key(text)
+        key = locate_bad_key(text, SceneFile)
         raise SceneFileError(f"{where}: {key}: {_one_line(error)}") from None
     try:
         _check(scene)
@@ -367,79 +367,3 @@ def _check_model_files(scene: SceneFile) -> None:
                 resolve_model_url(entry.file)
             except ValueError as error:
                 raise _BadValue(f"directives[{i}].{kind}.file", str(error)) from None
-
-
-# ----------------------------------------------------------------------- locating a bad key
-# yaml_load_typed's messages name the field at best, never its path. We find the path by
-# loading ever smaller pieces of the document: a piece keeps one branch of the YAML tree (tags
-# such as !Rpy intact), and the deepest branch that still fails alone is the culprit.
-
-
-def _locate_bad_key(text: str) -> str:
-    try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        return f"<yaml line {mark.line + 1}>" if mark is not None else "<yaml>"
-    if not isinstance(root, yaml.MappingNode):
-        return "<root>"
-    path: list[str] = []
-
-    def fails(wrapped: yaml.Node) -> bool:
-        try:
-            yaml_load_typed(schema=SceneFile, data=yaml.serialize(wrapped))
-        except Exception:
-            return True
-        return False
-
-    def wrap(chain: list[tuple[yaml.Node, object]], leaf: yaml.Node) -> yaml.Node:
-        # Rebuild the document holding only `leaf` at the end of the chain of parents.
-        node = leaf
-        for parent, key in reversed(chain):
-            if isinstance(parent, yaml.MappingNode):
-                node = yaml.MappingNode(parent.tag, [(key, node)], flow_style=False)
-            else:
-                node = yaml.SequenceNode(parent.tag, [node], flow_style=False)
-        return node
-
-    chain: list[tuple[yaml.Node, object]] = []
-    node: yaml.Node = root
-    while True:
-        if chain and fails(wrap(chain, _emptied(node))):
-            break  # the key itself is at fault (unknown, or of the wrong kind), not its content
-        children = _children(node)
-        found = None
-        for label, key, child in children:
-            if fails(wrap([*chain, (node, key)], child)):
-                found = (label, key, child)
-                break
-        if found is None:
-            break
-        label, key, child = found
-        path.append(label)
-        chain.append((node, key))
-        node = child
-    return _format_path(path) or "<root>"
-
-
-def _emptied(node: yaml.Node) -> yaml.Node:
-    if isinstance(node, yaml.MappingNode):
-        return yaml.MappingNode(node.tag, [], flow_style=True)
-    if isinstance(node, yaml.SequenceNode):
-        return yaml.SequenceNode(node.tag, [], flow_style=True)
-    return node
-
-
-def _children(node: yaml.Node) -> list[tuple[str, object, yaml.Node]]:
-    if isinstance(node, yaml.MappingNode):
-        return [(str(k.value), k, v) for k, v in node.value]
-    if isinstance(node, yaml.SequenceNode):
-        return [(f"[{i}]", None, v) for i, v in enumerate(node.value)]
-    return []
-
-
-def _format_path(parts: list[str]) -> str:
-    out = ""
-    for part in parts:
-        out += part if part.startswith("[") or not out else f".{part}"
-    return out

@@ -1,0 +1,56 @@
+"""The settings of the target-pose hypotheses (:mod:`~stucco_drake.core.pose_hypotheses`)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class HypothesisParams:
+    """Settings of :func:`~stucco_drake.core.pose_hypotheses.pose_hypotheses` (m unless noted).
+
+    Attributes:
+        contact_noise: standard deviation of a contact point about the touched surface.
+        other_object_cost: cost (negative log-likelihood, dimensionless) of a point lying on
+            another object; a point within ``contact_noise * sqrt(2 other_object_cost)`` of the
+            posed target's surface is cheaper on it (2.0: two standard deviations).
+        free_space_tolerance: penetration into the robot ignored per (config, point) pair.
+        free_space_scale: penetration beyond the tolerance costing one unit.
+        temperature: divides the costs before the weights are formed (dimensionless).
+        min_explained: fewest contact points the chosen pose must explain for any confidence.
+        n_restarts: ICP starts per proposal group.
+        outline_spacing: spacing of the outline points ICP fits.
+        fill_spacing: spacing of the cross-section points checked against free space, and
+            of the outline on which hypotheses are compared (closer ones count as one).
+        grid_spacing, grid_yaw: spacing (m, rad) of the grid of poses searched besides the
+            ICP proposals, over every placement that could touch a tracked point.
+        n_candidates: grid poses with the lowest contact cost kept as candidates.
+        n_polish: candidates (lowest full cost) refitted on the points each explains.
+        polish_iterations: refits of each (explain, fit, repeat).
+        sweep_spacing: spacing of the configs swept along a push that sensed nothing.
+        raster_resolution: cell size of the free-space slice.
+        grasp_margin, grasp_angle_margin: how much to spare (m, rad) a grasp needs to count
+            as closing under a hypothesis when the grasp is chosen and its confidence formed
+            (:func:`~stucco_drake.core.grasp_choice.choose_grasp`).
+    """
+
+    contact_noise: float = 0.004
+    other_object_cost: float = 2.0
+    free_space_tolerance: float = 0.002
+    free_space_scale: float = 0.002
+    temperature: float = 1.0
+    min_explained: int = 3
+    n_restarts: int = 20
+    outline_spacing: float = 0.002
+    fill_spacing: float = 0.005
+    grid_spacing: float = 0.01
+    grid_yaw: float = np.radians(5.0)
+    n_candidates: int = 300
+    n_polish: int = 30
+    polish_iterations: int = 5
+    sweep_spacing: float = 0.005
+    raster_resolution: float = 0.0025
+    grasp_margin: float = 0.01
+    grasp_angle_margin: float = np.radians(5.0)
