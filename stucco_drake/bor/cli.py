@@ -47,6 +47,10 @@ def add_run_command(subparsers) -> None:
     run.add_argument("--stucco-params", metavar="PARAMS.yaml", default=None,
                      help="STUCCO's parameters (YAML, fields of SoftTrackingParams over Table "
                           "I's sim preset; default: the scene's)")
+    run.add_argument("--policy", choices=("prescribed", "probe"), default="prescribed",
+                     help="what chooses the actions: the scene's prescribed list (default), or "
+                          "after it 'probe': guarded touches of the target where the live "
+                          "pose hypotheses put it")
     run.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
     run.add_argument("--record", metavar="OUT.html",
                      help="save a standalone Meshcat HTML recording of the run")
@@ -73,7 +77,9 @@ def _grasp_hook(enabled: bool):
 
 
 def run_bor(args: argparse.Namespace) -> int:
+    from stucco_drake.bor.diagram import build_bor_diagram
     from stucco_drake.bor.episode import run_episode
+    from stucco_drake.core.probing import ProbeParams
     from stucco_drake.scenes import load_scene, scene_paths
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 
@@ -90,9 +96,14 @@ def run_bor(args: argparse.Namespace) -> int:
     plot = prepare_output_file("--plot", args.plot)
     meshcat = start_meshcat(args.meshcat, record)
     for scene in scenes:
-        result = run_episode(scene, args.method, args.seed, args.actions, meshcat=meshcat,
-                             grasp=_grasp_hook(not args.no_grasp), dx_model=args.dx_model,
-                             tracker_params=params)
+        bor = None
+        if args.policy == "probe":
+            bor = build_bor_diagram(scene, args.method, args.seed, meshcat=meshcat,
+                                    tracker_params=params, dx_model=args.dx_model,
+                                    probe=ProbeParams())
+        result = run_episode(scene, args.method, args.seed, args.actions, bor=bor,
+                             meshcat=meshcat, grasp=_grasp_hook(not args.no_grasp),
+                             dx_model=args.dx_model, tracker_params=params)
         print(result.summary(), flush=True)
     if record:
         save_recording(meshcat, record)

@@ -180,6 +180,8 @@ def run_episode(
 ) -> EpisodeResult:
     """Plays the first ``n_actions`` actions of ``scene`` (all by default) through the BOR
     Diagram (``bor``, or one built for ``method`` and ``seed``), then scores the tracking.
+    A Diagram with a policy (``bor.policy``) plays until the policy stops (at most the
+    prescribed actions plus its ``max_actions``).
     ``simulator`` (of ``bor.diagram`` at time 0, default :func:`make_bor_simulator`) may be
     given, e.g. to clone its context midway.
 
@@ -193,6 +195,8 @@ def run_episode(
     bor = bor or build_bor_diagram(scene, method, seed, tracker_params=tracker_params,
                                    meshcat=meshcat, dx_model=dx_model)
     total = len(scene.actions)
+    if bor.policy is not None:  # the policy may play more than the prescribed actions
+        total += bor.policy.probe_state(bor.policy.CreateDefaultContext()).policy.params.max_actions
     n_actions = total if n_actions is None else min(int(n_actions), total)
     if simulator is None:
         simulator = make_bor_simulator(bor)
@@ -209,6 +213,9 @@ def run_episode(
         counts.append(len(contacts.points))
         if on_action is not None:
             on_action(k, contacts)
+        if bor.policy is not None and bor.diagram.GetOutputPort("probing_done").Eval(context)[0]:
+            n_actions = k + 1  # the policy has stopped: no action k + 1
+            break
     wall = time.perf_counter() - start
 
     points = np.asarray(bor.diagram.GetOutputPort("map_points").Eval(context))

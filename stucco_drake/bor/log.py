@@ -324,7 +324,7 @@ def scene_file_source(path: str | Path, scene: SceneFile) -> EpisodeSource:
         functools.partial(record_scene_file, path), log_penetration,
         functools.partial(grasp_success, scene=path),
         scene_set=scene_set(scene.name, scene.base, scene.layout_seed),
-        family=scene.base if scene.layout_seed is not None else "",
+        family=scene.base if scene.layout_seed is not None else "", scene_file=path,
     )  # fmt: skip
 
 

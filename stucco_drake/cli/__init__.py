@@ -15,6 +15,7 @@ import numpy as np
 
 from stucco_drake.bor.cli import add_diagram_command, add_run_command
 from stucco_drake.bor.log import BOR_SOURCES, table_scenes
+from stucco_drake.bor.probe_episode import POLICIES
 from stucco_drake.cli.estimates import add_estimates_command
 from stucco_drake.cli.scenes import add_scenes_command
 from stucco_drake.cli.sweep import add_sweep_command
@@ -82,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_sim_command(commands)
     add_scenes_command(commands)
     add_estimates_command(commands)
-    add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES}, table_scenes)
+    add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES}, table_scenes, POLICIES)
     add_run_command(commands)
     add_diagram_command(commands)
     add_sweep_command(commands)

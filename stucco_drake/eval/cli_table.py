@@ -144,10 +144,11 @@ TABLE_CONFIG = "table_config.yaml"
 
 
 def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingParams | None,
-                       filter_stream: int = 0, target_estimator: str = "rules") -> None:
+                       filter_stream: int = 0, target_estimator: str = "rules",
+                       policy: str = "prescribed") -> None:  # fmt: skip
     """Records in ``OUT/table_config.yaml`` the contact motion, STUCCO's full parameters
-    (Table I when None), the filter stream and the target estimator of the grasps the rows
-    of ``out`` are made with, or, when the
+    (Table I when None), the filter stream, the target estimator of the grasps and the
+    policy that chose the actions the rows of ``out`` are made with, or, when the
     file exists, checks that they are the same: rows are keyed by scene, seed and method
     only, so rows of two settings in one folder would pass for each other. ValueError naming
     the first setting that differs."""
@@ -157,7 +158,7 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
     params = stucco_params if stucco_params is not None else SoftTrackingParams.sim()
     config = plain({"dx_model": dx_model, "stucco_params": params.to_mapping(),
                     "filter_stream": int(filter_stream),
-                    "target_estimator": target_estimator})  # fmt: skip
+                    "target_estimator": target_estimator, "policy": policy})  # fmt: skip
     path = Path(out) / TABLE_CONFIG
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -172,13 +173,14 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
             or not set(recorded) <= set(config)
             or not isinstance(recorded["stucco_params"], dict)):  # fmt: skip
         raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params"
-                         f" and optionally filter_stream, target_estimator)")
+                         f" and optionally filter_stream, target_estimator, policy)")
     # What a file written before a setting existed lacks counts at that setting's default.
     old_params = {**plain(SoftTrackingParams.sim().to_mapping()), **recorded["stucco_params"]}
     settings = [("--dx-model ", recorded["dx_model"], dx_model),
                 ("--filter-stream ", recorded.get("filter_stream", 0), config["filter_stream"]),
                 ("--target-estimator ", recorded.get("target_estimator", "rules"),
-                 target_estimator)]
+                 target_estimator),
+                ("--policy ", recorded.get("policy", "prescribed"), policy)]
     settings += [(f"STUCCO's {name} = ", repr(old_params[name]), repr(value))
                  for name, value in config["stucco_params"].items()]  # fmt: skip
     for label, old, new in settings:
@@ -199,6 +201,7 @@ def make_table(
     stucco_params: SoftTrackingParams | None = None,
     filter_stream: int = 0,
     target_estimator: str = "rules",
+    policy: str = "prescribed",
 ) -> list[dict]:
     """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
 
@@ -207,7 +210,8 @@ def make_table(
     ``stucco_params`` STUCCO's parameters (None: Table I) and ``filter_stream`` which draws
     the trackers take (0: seeded with the episode's seed, as the paper's tables; K: another
     stream of draws on the same episodes, see :data:`STREAM_STRIDE`); ``target_estimator``
-    where the grasps are made (see :func:`replay_cached`). Scenes whose sources share a
+    where the grasps are made (see :func:`replay_cached`); ``policy`` names what chose the
+    episodes' actions (recorded only: ``sources`` produce them). Scenes whose sources share a
     ``family`` (the randomized layouts of one base scene) are tabled as one column group, their
     runs pooled. Rows are keyed by
     scene, seed and method only, so an OUT folder holds one of each: :func:`check_table_config`
@@ -223,7 +227,7 @@ def make_table(
     if target_estimator not in TARGET_ESTIMATORS:
         raise ValueError(f"target_estimator: expected one of {TARGET_ESTIMATORS}, "
                          f"got {target_estimator!r}")
-    check_table_config(out, dx_model, stucco_params, filter_stream, target_estimator)
+    check_table_config(out, dx_model, stucco_params, filter_stream, target_estimator, policy)
     results = RunResults(out / "runs.csv")
     replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources),
                                     dx_model=dx_model, stucco_params=stucco_params,
@@ -255,10 +259,14 @@ def make_table(
     return tabulate()
 
 
-def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=None) -> None:
+def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=None,
+                      policies: Mapping | None = None) -> None:  # fmt: skip
     """Adds ``table`` to the CLI's subparsers, over the scenes of ``sources`` and, with
     ``resolve(args, sources) -> (scene names, sources)``, whatever else it resolves (scene
-    files)."""
+    files). ``policies`` maps each closed-loop policy ``--policy`` offers besides
+    ``prescribed`` to ``make(source, scene, stucco_params, dx_model) -> EpisodeSource``, the
+    source whose episodes that policy drives (ValueError for a scene it cannot)."""
+    policies = dict(policies or {})
     table = subparsers.add_parser(
         "table", help="replay every method on logged episodes; write Table II and Fig. 5"
     )
@@ -282,6 +290,11 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
                        help="where the grasps are made: 'rules' (Table II's segment "
                             "selection) or 'hypotheses' (the grasp chosen across weighted "
                             "pose hypotheses)")
+    table.add_argument("--policy", choices=("prescribed", *policies), default="prescribed",
+                       help="what chooses the actions: the scene's prescribed list (default)"
+                            + (", or after it 'probe': guarded touches of the likeliest target"
+                               " pose of STUCCO's live hypotheses" if "probe" in policies
+                               else ""))
     table.add_argument("--workers", type=positive_int, default=None,
                        help="parallel workers (default: one per CPU)")
     table.add_argument("--executor", choices=("process", "dask"), default="process",
@@ -289,11 +302,11 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
     table.add_argument("--scheduler", default=None,
                        help="Dask scheduler address (default: start a local cluster)")
     table.set_defaults(run=functools.partial(run_table_command, sources=sources,
-                                             resolve=resolve))
+                                             resolve=resolve, policies=policies))
 
 
 def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOURCES,
-                      resolve=None) -> int:  # fmt: skip
+                      resolve=None, policies: Mapping | None = None) -> int:  # fmt: skip
     """Handler of ``stucco-drake table``: 0 done, 1 interrupted (rerun resumes); a bad input
     raises InputError (the CLI's main reports it) before any simulation. ``resolve`` as
     :func:`add_table_command`'s; each scene's set is printed first."""
@@ -305,13 +318,18 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
         if resolve is not None:
             scenes, sources = resolve(args.scenes, sources)
         check_names(scenes, args.methods, sources)
+        policy = getattr(args, "policy", "prescribed")
+        if policy != "prescribed":
+            make = (policies or {})[policy]
+            sources = {**sources, **{scene: make(sources[scene], scene, stucco_params,
+                                                 args.dx_model) for scene in scenes}}
     except ValueError as error:
         raise InputError(str(error)) from None
     out = prepare_output_folder("--out", args.out)
     try:
         # OUT's rows of other settings, or a runs file of another version, are refused now.
         check_table_config(out, args.dx_model, stucco_params, args.filter_stream,
-                           args.target_estimator)
+                           args.target_estimator, policy)
         RunResults(out / "runs.csv").rows()
         executor = make_executor(args.executor, args.workers, args.scheduler)
     except (ValueError, RuntimeError) as error:  # RuntimeError: the Dask executor without Dask
@@ -323,7 +341,7 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
                               sources=sources, dx_model=args.dx_model,
                               stucco_params=stucco_params,
                               filter_stream=args.filter_stream,
-                              target_estimator=args.target_estimator)
+                              target_estimator=args.target_estimator, policy=policy)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1

@@ -30,6 +30,8 @@ class EpisodeSource:
         scene_set: the evaluation set the scene belongs to (see :mod:`stucco_drake.eval.sets`).
         family: the column group of the scene in a table: a randomized layout's base scene
             (its layouts are tabled together); empty: the scene's own name.
+        scene_file: the scene file the episodes are of (empty: a built-in scene, by name);
+            what a closed-loop policy's producer simulates (see ``table --policy``).
     """
 
     produce: Callable[[str, int], EpisodeLog]
@@ -37,6 +39,7 @@ class EpisodeSource:
     grasp: GraspCheck | None = None
     scene_set: str = "other"
     family: str = ""
+    scene_file: str = ""
 
     def penetration_for(self, log: EpisodeLog, method: str) -> RobotPenetration | None:
         """The pxpen ``method`` needs on ``log``: STUCCO's from ``penetration``; None for the

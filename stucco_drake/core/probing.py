@@ -1,0 +1,358 @@
+"""Touching the target last: guarded probes of its likeliest pose, chosen from the belief.
+
+A prescribed push script can move the target after its last sensed contact (a box turned by
+the gripper sliding past it), and then no estimator can recover the final pose from the
+contacts. A probe touches the target where the current pose hypotheses put one of its faces:
+the gripper travels, around the hypothesised target, to a stand-off point in front of the
+face, steps towards it until the detector reports contact (or it has gone well past where the
+face should be), and backs off. Each probe is planned from the latest hypotheses, so a touch
+that finds the face elsewhere corrects the next one. A contact while travelling (the target
+where it was not believed to be, or clutter) is backed off from at once and the probe planned
+again, so that the gripper does not drag what it bumped.
+
+Which faces: a box's long face nearest the gripper at two points (its yaw and one coordinate),
+then the nearer short face at its centre (the other coordinate); a cylinder from the two
+directions 45 degrees either side of the gripper's. Probes whose stand-off point lies outside
+the workspace, or (by default) that the gripper cannot reach in a straight line clear of the
+hypothesised target, are skipped.
+
+Everything is planar: points (x, y) in the world frame W (m), yaw about world z (rad). The
+gripper's footprint is given as points in W axes about its origin (its yaw is fixed).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+from collections.abc import Callable
+
+import numpy as np
+
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+
+
+@dataclasses.dataclass(frozen=True)
+class ProbeParams:
+    """Settings of :class:`FaceProbePolicy` (m unless noted).
+
+    Attributes:
+        standoff: gap between the gripper's footprint and the hypothesised face at the
+            stand-off point.
+        clearance: extra room around the hypothesised target when travelling past it.
+        travel_step: longest step while travelling and approaching (a bump pushes what it
+            meets by up to a step: less than the controller's own clip).
+        approach_step: planar step per action towards the face.
+        overshoot: how far past the hypothesised face the approach goes before giving up.
+        back_off: step away from the face after a touch.
+        arrive_tolerance: distance at which a travel waypoint counts as reached.
+        max_actions: actions the probing may take in all.
+        max_bumps: contacts while travelling to one probe (each backed off from and the
+            probe planned again) before that probe is given up.
+        direct_only: make only the probes whose stand-off point the gripper reaches in a
+            straight line, clear of the hypothesised target: going round it leads into
+            clutter nothing has been sensed of.
+        long_face_offsets: where along a box's long face (fractions of its half length) it
+            is touched.
+        cylinder_angles: directions (rad) either side of the gripper's from which a cylinder
+            is touched.
+    """
+
+    standoff: float = 0.02
+    clearance: float = 0.03
+    travel_step: float = 0.02
+    approach_step: float = 0.01
+    overshoot: float = 0.03
+    back_off: float = 0.02
+    arrive_tolerance: float = 0.005
+    max_actions: int = 40
+    max_bumps: int = 1
+    direct_only: bool = True
+    long_face_offsets: tuple[float, ...] = (-0.5, 0.5)
+    cylinder_angles: tuple[float, ...] = (np.pi / 4, -np.pi / 4)
+
+
+@dataclasses.dataclass(frozen=True)
+class Probe:
+    """One touch: the face point to touch and the face's outward normal (both in W)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+
+
+def _rotation(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
+def outline_box(pose, shape: BoxSdf | CylinderSdf) -> tuple[np.ndarray, np.ndarray, float]:
+    """(centre (2,), half extents (2,), yaw) of the target's planar bounding box at ``pose``
+    (x, y, yaw) in W; a cylinder's is the square about its circle."""
+    pose = np.asarray(pose, dtype=np.float64)
+    centre = pose[:2] + _rotation(pose[2]) @ np.asarray(shape.center, dtype=np.float64)[:2]
+    if isinstance(shape, BoxSdf):
+        half = np.asarray(shape.half_extents, dtype=np.float64)[:2]
+    elif isinstance(shape, CylinderSdf):
+        half = np.full(2, float(shape.radius))
+    else:
+        raise TypeError(f"unsupported target shape {type(shape).__name__}")
+    return centre, half, float(pose[2])
+
+
+def plan_probes(pose, shape: BoxSdf | CylinderSdf, gripper_xy, params: ProbeParams) -> list[Probe]:
+    """The touches of the target at ``pose`` (x, y, yaw) seen from the gripper at
+    ``gripper_xy``, in the order they are made (see the module's docstring)."""
+    centre, half, yaw = outline_box(pose, shape)
+    towards = np.asarray(gripper_xy, dtype=np.float64) - centre
+    if isinstance(shape, CylinderSdf):
+        base = np.arctan2(towards[1], towards[0])
+        probes = []
+        for angle in params.cylinder_angles:
+            normal = np.array([np.cos(base + angle), np.sin(base + angle)])
+            probes.append(Probe(centre + shape.radius * normal, normal))
+        return probes
+    R = _rotation(yaw)
+    local = R.T @ towards
+    long_axis = int(np.argmax(half))
+    short_axis = 1 - long_axis
+    # The long faces' normals lie along the short axis; take the one facing the gripper.
+    long_normal = np.zeros(2)
+    long_normal[short_axis] = 1.0 if local[short_axis] >= 0 else -1.0
+    probes = []
+    for fraction in params.long_face_offsets:
+        along = np.zeros(2)
+        along[long_axis] = fraction * half[long_axis]
+        point = along + long_normal * half[short_axis]
+        probes.append(Probe(centre + R @ point, R @ long_normal))
+    end_normal = np.zeros(2)
+    end_normal[long_axis] = 1.0 if local[long_axis] >= 0 else -1.0
+    probes.append(Probe(centre + R @ (end_normal * half[long_axis]), R @ end_normal))
+    return probes
+
+
+def _segment_enters_box(a, b, centre, half, yaw) -> bool:
+    """Whether the segment a-b (W) passes through the interior of the box (centre, half
+    extents, yaw), by clipping it against the box's slabs in the box's frame."""
+    R = _rotation(yaw)
+    p, d = R.T @ (np.asarray(a) - centre), R.T @ (np.asarray(b) - np.asarray(a))
+    lo, hi = 0.0, 1.0
+    for axis in range(2):
+        if abs(d[axis]) < 1e-12:
+            if abs(p[axis]) >= half[axis]:
+                return False
+            continue
+        t1, t2 = (-half[axis] - p[axis]) / d[axis], (half[axis] - p[axis]) / d[axis]
+        lo, hi = max(lo, min(t1, t2)), min(hi, max(t1, t2))
+        if lo >= hi:
+            return False
+    return hi - lo > 1e-9
+
+
+def travel_waypoints(start, goal, centre, half, yaw) -> list[np.ndarray]:
+    """Waypoints (W) from ``start`` to ``goal`` that keep out of the box (centre, half extents,
+    yaw): straight when the segment clears it, else around its corners the shorter way; from
+    a start inside or on the box, out through its nearest side first."""
+    start, goal = np.asarray(start, dtype=np.float64), np.asarray(goal, dtype=np.float64)
+    if not _segment_enters_box(start, goal, centre, half, yaw):
+        return [goal]
+    R = _rotation(yaw)
+    local = R.T @ (start - centre)
+    if np.all(np.abs(local) < half + 2e-3):
+        # Inside or on the box (just backed off from it): out through the nearest side first.
+        axis = int(np.argmin(half - np.abs(local)))
+        local[axis] = np.copysign(half[axis] + 3e-3, local[axis])
+        exit_point = centre + R @ local
+        return [exit_point, *travel_waypoints(exit_point, goal, centre, half, yaw)]
+    # Corners pushed 1 mm further out, so that paths along the edges clear the box.
+    signs = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=np.float64)  # counter-clockwise
+    corners = centre + (signs * (half + 1e-3)) @ R.T
+    best, best_length = [goal], np.inf
+    for first in range(4):
+        if _segment_enters_box(start, corners[first], centre, half, yaw):
+            continue
+        for direction in (1, -1):
+            path, k = [corners[first]], first
+            for _ in range(4):
+                if not _segment_enters_box(path[-1], goal, centre, half, yaw):
+                    break
+                k = (k + direction) % 4
+                path.append(corners[k])
+            points = [start, *path, goal]
+            length = sum(np.linalg.norm(q - p) for p, q in itertools.pairwise(points))
+            if length < best_length:
+                best, best_length = [*path, goal], length
+    return best
+
+
+def _shorter(step: np.ndarray, length: float) -> np.ndarray:
+    """``step`` shortened to at most ``length`` (same direction)."""
+    norm = float(np.linalg.norm(step))
+    return step if norm <= length else step * (length / norm)
+
+
+def footprint_support(footprint: np.ndarray, direction: np.ndarray) -> float:
+    """How far (m) the gripper's footprint (m, 2) reaches from its origin along ``direction``."""
+    return float(np.max(np.asarray(footprint) @ np.asarray(direction, dtype=np.float64)))
+
+
+class FaceProbePolicy:
+    """Plans and plays the probes, one planar step per action (see the module's docstring).
+
+    Call :meth:`next_step` at the start of every action with where the gripper is, whether
+    the action just finished sensed contact, and the likeliest target pose now (or None, or a
+    function returning either, called only when a probe is planned: hypotheses are costly); it
+    returns the step (2,) (m, W) or None when probing is over. The probes are re-planned from
+    the pose given at the start of each, and the k-th probe of that plan is made.
+
+    Args:
+        shape: the target's known geometry in its own frame.
+        footprint: (m, 2) points of the gripper's planar footprint about its origin (W axes).
+        max_step: per-axis clip of a step (m), the controller's.
+        params: the probes' settings.
+        in_workspace: whether a planar point (W) is one the gripper may be sent to.
+    """
+
+    def __init__(self, shape: BoxSdf | CylinderSdf, footprint, max_step: float,
+                 params: ProbeParams | None = None,
+                 in_workspace: Callable[[np.ndarray], bool] | None = None):  # fmt: skip
+        self.shape, self.params = shape, params or ProbeParams()
+        self.footprint = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
+        self.max_step = float(max_step)
+        self.in_workspace = in_workspace or (lambda xy: True)
+        self.radius = float(np.max(np.linalg.norm(self.footprint, axis=1)))
+        self.actions = 0
+        self.touches = 0
+        self.probes_done = 0
+        self.bumps = 0
+        self._probe_bumps = 0
+        self._phase, self._probe, self._waypoints = "plan", None, []
+        self._last_phase, self._last_xy, self._last_step = "", None, np.zeros(2)
+
+    def next_step(self, gripper_xy, in_contact: bool, pose) -> np.ndarray | None:
+        """The next action's step (m, W), or None when done (see the class docstring)."""
+        xy = np.asarray(gripper_xy, dtype=np.float64)
+        if self.actions >= self.params.max_actions:
+            return None
+        step = self._decide(xy, bool(in_contact), pose)
+        self._last_xy = xy
+        if step is None:
+            return None
+        self.actions += 1
+        self._last_step = np.clip(step, -self.max_step, self.max_step)
+        return self._last_step
+
+    def _decide(self, xy, in_contact: bool, pose):
+        for _ in range(8):  # phase changes within one decision; a handful suffice
+            if self._phase == "plan":
+                pose = pose() if callable(pose) else pose
+                if pose is None or not self._plan(xy, pose):
+                    return None
+            elif self._phase == "travel":
+                if in_contact and self._last_phase == "travel":
+                    # Something is in the way (the target where it was not believed to be, or
+                    # clutter): back off and plan this probe again from the updated belief.
+                    return self._emit("bump", self._bump())
+                step = self._travel(xy)
+                if step is not None:
+                    return self._emit("travel", step)
+            elif self._phase == "approach":
+                if in_contact and self._last_phase == "approach":
+                    self.touches += 1
+                    self._phase = "retreat"
+                    continue
+                step = self._approach(xy)
+                if step is not None:
+                    return self._emit("approach", step)
+            else:  # retreat
+                self.probes_done += 1
+                self._probe_bumps = 0
+                self._phase = "plan"
+                return self._emit("retreat", self._probe.normal * self.params.back_off)
+        return None
+
+    def _bump(self) -> np.ndarray:
+        """The step back along the last travel step; the probe is given up after
+        ``max_bumps`` bumps."""
+        self.bumps += 1
+        self._probe_bumps += 1
+        if self._probe_bumps > self.params.max_bumps:
+            self.probes_done += 1
+            self._probe_bumps = 0
+        self._phase = "plan"
+        direction = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
+        return -direction * self.params.back_off
+
+    def _emit(self, phase: str, step: np.ndarray) -> np.ndarray:
+        self._last_phase = phase
+        return step
+
+    def _plan(self, xy, pose) -> bool:
+        """Sets up the next probe that can be made; False when none is left."""
+        p = self.params
+        while True:
+            probes = plan_probes(pose, self.shape, xy, p)
+            if self.probes_done >= len(probes):
+                return False
+            probe = probes[self.probes_done]
+            # Travel ends outside the box grown by the footprint's radius; the approach
+            # starts there, along the face's normal.
+            far = probe.point + probe.normal * (self.radius + p.clearance + p.standoff)
+            centre, half, yaw = outline_box(pose, self.shape)
+            grown = half + self.radius + p.clearance
+            waypoints = travel_waypoints(xy, far, centre, grown, yaw)
+            # Leaving the box's margin first (just backed off from a face) still counts as
+            # direct: the exit is through the side the gripper is on.
+            local = _rotation(yaw).T @ (xy - centre)
+            exits = int(np.all(np.abs(local) < grown + 2e-3))
+            direct = len(waypoints) <= 1 + exits or not p.direct_only
+            if direct and all(self.in_workspace(w) for w in waypoints):
+                self._probe, self._waypoints, self._phase = probe, waypoints, "travel"
+                return True
+            self.probes_done += 1
+
+    def _travel(self, xy):
+        """The step towards the next waypoint, or None once the last is reached (the approach
+        follows) or the gripper is stuck (the probe is given up)."""
+        if self._last_phase == "travel" and self._last_xy is not None:
+            moved = float(np.linalg.norm(xy - self._last_xy))
+            if moved < 0.2 * float(np.linalg.norm(self._last_step)):
+                self.probes_done += 1
+                self._phase = "plan"
+                self._last_phase = ""
+                return None
+        while self._waypoints and np.linalg.norm(self._waypoints[0] - xy) < \
+                self.params.arrive_tolerance:  # fmt: skip
+            self._waypoints.pop(0)
+        if not self._waypoints:
+            self._phase = "approach"
+            return None
+        return _shorter(self._waypoints[0] - xy, self.params.travel_step)
+
+    def _gap(self, xy) -> float:
+        """Distance (m) from the gripper's footprint to the probed face's plane, along its
+        normal (negative once past it)."""
+        n = self._probe.normal
+        return float((xy - self._probe.point) @ n) - footprint_support(self.footprint, -n)
+
+    def _approach(self, xy):
+        """The step towards the face: by up to ``travel_step`` to ``standoff`` from it, then
+        by ``approach_step``; None (and the retreat) once ``overshoot`` past it."""
+        p, n = self.params, self._probe.normal
+        gap = self._gap(xy)
+        if gap < -p.overshoot:
+            self._phase = "retreat"
+            return None
+        if gap > p.standoff + p.approach_step:
+            return -n * min(gap - p.standoff, p.travel_step)
+        return -n * p.approach_step
+
+
+def gripper_footprint(penetration, rotation_WE) -> np.ndarray:
+    """(m, 2) the gripper's planar footprint about its origin in W axes (m): the cells inside
+    the robot of a grid pxpen (``penetration.robot_sdf``, in the end-effector frame E),
+    every height, turned by ``rotation_WE`` (3, 3)."""
+    grid = penetration.robot_sdf
+    inside = np.argwhere(np.asarray(grid.values) < 0)
+    points_E = np.asarray(grid.lower) + inside * float(grid.resolution)
+    xy = (points_E @ np.asarray(rotation_WE, dtype=np.float64).T)[:, :2]
+    # The convex hull's extremes suffice for supports and radii; keep the outermost cells.
+    return np.unique(np.round(xy, 4), axis=0)

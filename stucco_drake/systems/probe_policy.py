@@ -1,0 +1,116 @@
+"""ProbePolicy: the planar step of every action, prescribed first, then guarded probes.
+
+A thin wrapper around :class:`~stucco_drake.core.probing.FaceProbePolicy`: it plays a list of
+prescribed steps, then touches the faces of the likeliest target pose of the pose hypotheses,
+each step decided at its action's start from the detector's verdict on the action before and
+where the gripper is.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from stucco_drake.core.detection import ActionContact
+from stucco_drake.core.probing import FaceProbePolicy
+
+
+@dataclasses.dataclass
+class ProbeState:
+    """Abstract state: the probing policy as of the last decided action, that action's
+    index (-1: none yet) and its step (m, world), None once probing is over."""
+
+    policy: FaceProbePolicy
+    decided: int = -1
+    step: np.ndarray | None = None
+
+
+class ProbePolicy(LeafSystem):
+    """Source of the planar step of every action (m, world frame): ``prescribed`` steps, then
+    the probes of :class:`~stucco_drake.core.probing.FaceProbePolicy`.
+
+    The step of action k is decided at t = k ``duration`` (its start), from the inputs then:
+    the output computes it from the state of action k-1 without changing anything, and the
+    update event due at that instant stores the same decision, so the controller, which reads
+    the step at the same instant, and the state agree.
+
+    Input ports:
+        body_poses: the plant's body poses (list of RigidTransform by BodyIndex).
+        current_action: the detector's :class:`ActionContact` of the action under way (at an
+            action's start: of the action that just ended).
+        pose_hypotheses: the target-pose estimator's hypotheses (None: none yet); evaluated
+            only when a probe is planned.
+
+    Output ports:
+        planar_step: (dx, dy) of the action under way (m, world); zeros once probing is over.
+        probing_done: 1-vector, 1.0 once the policy has stopped (no action is under way).
+
+    Args:
+        prescribed: (N, 2) the steps played first (m, world).
+        duration: the actions' duration (s).
+        gripper_frame: the plant's frame whose origin the steps move (its pose from
+            ``body_poses`` and its fixed offset in its body).
+        policy: the probing policy, played after the prescribed steps (its state is copied).
+    """
+
+    def __init__(self, prescribed, duration: float, gripper_frame, policy: FaceProbePolicy):
+        super().__init__()
+        self._prescribed = np.asarray(prescribed, dtype=np.float64).reshape(-1, 2)
+        self._duration = float(duration)
+        self._body = int(gripper_frame.body().index())
+        self._X_BG = gripper_frame.GetFixedPoseInBodyFrame()
+        self._poses = self.DeclareAbstractInputPort(
+            "body_poses", AbstractValue.Make([RigidTransform()]))
+        self._verdict = self.DeclareAbstractInputPort(
+            "current_action", AbstractValue.Make(ActionContact()))
+        self._hypotheses = self.DeclareAbstractInputPort(
+            "pose_hypotheses", AbstractValue.Make(None))
+        self._state = self.DeclareAbstractState(
+            AbstractValue.Make(ProbeState(copy.deepcopy(policy))))
+        self.DeclareVectorOutputPort("planar_step", 2, self.calc_planar_step)
+        self.DeclareVectorOutputPort("probing_done", 1, self.calc_probing_done)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(self._duration, 0.0, self._on_action_start)
+
+    def _action(self, context) -> int:
+        # The action sequence's tolerance: t = k * duration, in floating point, counts as k.
+        return int(np.floor(context.get_time() / self._duration + 1e-6))
+
+    def _decide(self, context) -> ProbeState:
+        """The state once the action under way is decided (a copy when it is new)."""
+        state = context.get_abstract_state(int(self._state)).get_value()
+        k = self._action(context)
+        if state.decided == k:
+            return state
+        if k < len(self._prescribed):
+            return ProbeState(state.policy, k, self._prescribed[k].copy())
+        if state.step is None and state.decided >= len(self._prescribed):
+            return ProbeState(state.policy, k, None)
+        policy = copy.deepcopy(state.policy)
+        X_WG = self._poses.Eval(context)[self._body] @ self._X_BG
+        verdict = self._verdict.Eval(context)
+        step = policy.next_step(X_WG.translation()[:2], bool(verdict.in_contact),
+                                lambda: self._likeliest_pose(context))
+        return ProbeState(policy, k, None if step is None else np.asarray(step, dtype=float))
+
+    def _likeliest_pose(self, context):
+        hypotheses = self._hypotheses.Eval(context)
+        return None if hypotheses is None else np.asarray(hypotheses.pose)
+
+    def _on_action_start(self, context, state):
+        state.get_mutable_abstract_state(int(self._state)).set_value(self._decide(context))
+
+    def calc_planar_step(self, context, output: BasicVector):
+        step = self._decide(context).step
+        output.SetFromVector(np.zeros(2) if step is None else step)
+
+    def calc_probing_done(self, context, output: BasicVector):
+        output.SetFromVector([1.0 if self._decide(context).step is None else 0.0])
+
+    def probe_state(self, context) -> ProbeState:
+        """The policy's state (its counters: ``policy.actions``, ``touches``, ...)."""
+        return context.get_abstract_state(int(self._state)).get_value()
