@@ -88,17 +88,3 @@ def test_bad_scales_or_shapes_are_one_line_errors():
                                  scales=(0.0, 1.5))  # fmt: skip
     with pytest.raises(ValueError, match="tracked"):
         motion_scaled_hypotheses(np.random.default_rng(0), points, points[:3], labels, BOX)
-
-
-def test_staleness_counts_the_contact_actions_after_each_point_and_is_off_by_default():
-    """Five actions, the second without contact; points sensed at actions 0, 1, 3 and 4 have
-    3, 3, 1 and 0 later actions with contact: at 2 mm each, 6, 6, 2 and 0 mm (the cap, 5 mm,
-    clips the first two)."""
-    from stucco_drake.core.motion_scale import staleness
-    from stucco_drake.core.pose_hypotheses import FreeSpace, HypothesisParams
-
-    free = FreeSpace(None, np.zeros((5, 3)), None, np.array([0, 1, 3, 4]),
-                     free_actions=np.array([False, True, False, False, False]))
-    assert staleness(free, HypothesisParams()) is None
-    stale = staleness(free, HypothesisParams(staleness_per_action=0.002, max_staleness=0.005))
-    np.testing.assert_allclose(stale, [0.005, 0.005, 0.002, 0.0], atol=1e-15)

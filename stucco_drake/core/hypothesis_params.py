@@ -34,10 +34,6 @@ class HypothesisParams:
         grasp_margin, grasp_angle_margin: how much to spare (m, rad) a grasp needs to count
             as closing under a hypothesis when the grasp is chosen and its confidence formed
             (:func:`~stucco_drake.core.grasp_choice.choose_grasp`).
-        staleness_per_action, max_staleness: how much (m) a contact point's noise grows per
-            action that made contact after it was sensed, up to ``max_staleness`` (0: not
-            at all): the target may have been pushed since, so older points count less
-            than fresh ones (see :func:`~stucco_drake.core.motion_scale.staleness`).
     """
 
     contact_noise: float = 0.004
@@ -58,5 +54,3 @@ class HypothesisParams:
     raster_resolution: float = 0.0025
     grasp_margin: float = 0.01
     grasp_angle_margin: float = np.radians(5.0)
-    staleness_per_action: float = 0.0
-    max_staleness: float = 0.03

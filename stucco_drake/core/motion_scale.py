@@ -65,11 +65,10 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
     if len(scales) == 0 or np.any((scales < 0.0) | (scales > 1.0)):
         raise ValueError(f"scales: expected motion scales in [0, 1], got {scales.tolist()}")
     found = []
-    stale = staleness(free_space, params)
     for scale in scales:
         points = sensed + scale * (tracked - sensed)
-        result = search_hypotheses(rng, points, labels, shape, spread=stale,
-                                   free_space=free_space, params=params)  # fmt: skip
+        result = search_hypotheses(rng, points, labels, shape, free_space=free_space,
+                                   params=params)  # fmt: skip
         if result is not None:
             found.append((*result, np.full(len(result[0]), scale)))
     if not found:
@@ -79,19 +78,4 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
     return weigh_hypotheses(poses, costs, explained, shape, params, scale_of)
 
 
-def staleness(free_space: FreeSpace | None, params: HypothesisParams) -> np.ndarray | None:
-    """(n,) how much (m) each contact point of ``free_space.point_steps`` is in doubt for its
-    age: ``params.staleness_per_action`` times the number of later actions that made contact
-    (each may have pushed the target), at most ``params.max_staleness``; None when that rate
-    is 0 or the free space does not say which actions made contact."""
-    if (params.staleness_per_action <= 0.0 or free_space is None
-            or free_space.free_actions is None):  # fmt: skip
-        return None
-    contact = ~np.asarray(free_space.free_actions, dtype=bool)
-    # later[k]: actions after action k that made contact.
-    later = np.append(np.cumsum(contact[::-1])[::-1], 0)[1:]
-    age = later[np.asarray(free_space.point_steps, dtype=np.int64)]
-    return np.minimum(params.staleness_per_action * age, params.max_staleness)
-
-
-__all__ = ["MOTION_SCALES", "motion_scaled_hypotheses", "staleness"]
+__all__ = ["MOTION_SCALES", "motion_scaled_hypotheses"]
