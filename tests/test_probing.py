@@ -83,11 +83,11 @@ def footprint_gap(xy, pose) -> float:
     return float(box_distance(pose, cells).min())
 
 
-def guarded_move(xy, step, pose):
+def guarded_move(xy, step, pose, gap=footprint_gap):
     """(where, touched): the footprint moved by ``step`` in 1/30 increments, stopped at the
-    first that would overlap BOX at ``pose``."""
+    first at which ``gap(where, pose)`` (BOX's, by default) would be 0 or less."""
     for fraction in np.linspace(0, 1, 31)[1:]:
-        if footprint_gap(xy + fraction * step, pose) <= 0:
+        if gap(xy + fraction * step, pose) <= 0:
             return xy + (fraction - 1 / 30) * step, True
     return xy + step, False
 
@@ -176,7 +176,7 @@ def test_a_can_is_probed_from_both_sides_in_straight_lines():
     policy = FaceProbePolicy(can, FOOTPRINT, max_step=0.03)
     xy, in_contact, gaps = np.array([0.2, -0.25]), False, []
 
-    def gap(at):
+    def gap(at, pose):
         gx, gy = np.meshgrid(np.arange(-0.04, 0.0401, 0.002), np.arange(-0.05, 0.0501, 0.002))
         cells = np.column_stack([gx.ravel(), gy.ravel()]) + at
         return float((np.linalg.norm(cells - pose[:2], axis=1) - can.radius).min())
@@ -185,14 +185,8 @@ def test_a_can_is_probed_from_both_sides_in_straight_lines():
         step = policy.next_step(xy, in_contact, pose)
         if step is None:
             break
-        in_contact = False
-        for fraction in np.linspace(0, 1, 31)[1:]:
-            if gap(xy + fraction * step) <= 0:
-                xy, in_contact = xy + (fraction - 1 / 30) * step, True
-                break
-        else:
-            xy = xy + step
+        xy, in_contact = guarded_move(xy, step, pose, gap)
         if in_contact:
-            gaps.append(gap(xy))
+            gaps.append(gap(xy, pose))
     assert policy.touches == 2 and policy.bumps == 0
     assert len(gaps) == 2 and max(gaps) <= 0.03 / 30 + 1e-9
