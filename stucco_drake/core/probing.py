@@ -14,7 +14,7 @@ Which faces: a box's long face nearest the gripper at two points (its yaw and on
 then the nearer short face at its centre (the other coordinate); a cylinder from the two
 directions 45 degrees either side of the gripper's. Probes whose stand-off point lies outside
 the workspace, or (by default) that the gripper cannot reach in a straight line clear of the
-hypothesised target (a margin box round a box, a margin circle round a can), are skipped.
+hypothesised target, are skipped.
 
 Everything is planar: points (x, y) in the world frame W (m), yaw about world z (rad). The
 gripper's footprint is given as points in W axes about its origin (its yaw is fixed).
@@ -297,36 +297,17 @@ class FaceProbePolicy:
             # starts there, along the face's normal.
             far = probe.point + probe.normal * (self.radius + p.clearance + p.standoff)
             centre, half, yaw = outline_box(pose, self.shape)
-            if isinstance(self.shape, CylinderSdf):
-                # Round a can: straight there if the footprint keeps ``clearance`` from the
-                # can all the way (or as much as it has now, just backed off from it).
-                gaps = self._can_gaps(xy, far, centre)
-                waypoints = [far]
-                direct = gaps.min() >= min(p.clearance, gaps[0]) - 3e-3
-            else:
-                grown = half + self.radius + p.clearance
-                waypoints = travel_waypoints(xy, far, centre, grown, yaw)
-                # Leaving the box's margin first (just backed off from a face) still counts
-                # as direct: the exit is through the side the gripper is on.
-                local = _rotation(yaw).T @ (xy - centre)
-                exits = int(np.all(np.abs(local) < grown + 2e-3))
-                direct = len(waypoints) <= 1 + exits
-            direct = direct or not p.direct_only
+            grown = half + self.radius + p.clearance
+            waypoints = travel_waypoints(xy, far, centre, grown, yaw)
+            # Leaving the box's margin first (just backed off from a face) still counts as
+            # direct: the exit is through the side the gripper is on.
+            local = _rotation(yaw).T @ (xy - centre)
+            exits = int(np.all(np.abs(local) < grown + 2e-3))
+            direct = len(waypoints) <= 1 + exits or not p.direct_only
             if direct and all(self.in_workspace(w) for w in waypoints):
                 self._probe, self._waypoints, self._phase = probe, waypoints, "travel"
                 return True
             self.probes_done += 1
-
-    def _can_gaps(self, a, b, centre) -> np.ndarray:
-        """(k,) gaps (m) between the footprint and the can at points every 5 mm from a to b."""
-        a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-        count = max(2, int(np.ceil(np.linalg.norm(b - a) / 0.005)) + 1)
-        points = a + np.linspace(0.0, 1.0, count)[:, None] * (b - a)
-        towards = centre - points
-        distance = np.linalg.norm(towards, axis=1)
-        units = towards / np.maximum(distance, 1e-9)[:, None]
-        reach = np.max(units @ self.footprint.T, axis=1)  # the footprint's support towards it
-        return distance - reach - float(self.shape.radius)
 
     def _travel(self, xy):
         """The step towards the next waypoint, or None once the last is reached (the approach
