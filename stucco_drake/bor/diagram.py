@@ -313,7 +313,6 @@ def _add_probe_policy(builder: DiagramBuilder, sub, built: BuiltScene, chain, pr
     poses, the detector's verdict and the pose hypotheses; its step drives the scene."""
     scene = built.scene
     max_step = float(scene.control.max_step)
-    prescribed = np.clip(np.asarray(scene.actions, dtype=float).reshape(-1, 2), -1, 1) * max_step
     frame = built.gripper_frame()
     # The footprint at the start pose: the gripper's yaw is held for the whole episode.
     R_WE = frame.CalcPoseInWorld(built.plant.CreateDefaultContext()).rotation().matrix()
@@ -321,7 +320,7 @@ def _add_probe_policy(builder: DiagramBuilder, sub, built: BuiltScene, chain, pr
     probing = FaceProbePolicy(target_shape(built), footprint, max_step, probe,
                               in_workspace=scene.in_workspace)
     policy = builder.AddNamedSystem(
-        "probe_policy", ProbePolicy(prescribed, scene.action_duration, frame, probing))
+        "probe_policy", ProbePolicy(scene.planar_steps(), scene.action_duration, frame, probing))
     builder.Connect(sub.GetOutputPort("body_poses"), policy.GetInputPort("body_poses"))
     builder.Connect(chain.detector.GetOutputPort("current_action"),
                     policy.GetInputPort("current_action"))

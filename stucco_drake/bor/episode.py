@@ -196,7 +196,7 @@ def run_episode(
                                    meshcat=meshcat, dx_model=dx_model)
     total = len(scene.actions)
     if bor.policy is not None:  # the policy may play more than the prescribed actions
-        total += bor.policy.probe_state(bor.policy.CreateDefaultContext()).policy.params.max_actions
+        total += bor.policy.max_actions
     n_actions = total if n_actions is None else min(int(n_actions), total)
     if simulator is None:
         simulator = make_bor_simulator(bor)

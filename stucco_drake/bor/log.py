@@ -9,7 +9,8 @@ every object and the gripper's distance to each; at the end the plant's state. R
 log (:func:`stucco_drake.eval.replay.replay`) needs the gripper's pxpen
 (:func:`log_penetration`) and grasps from the logged final state (:func:`grasp_from_log`).
 The recording itself (:class:`EpisodeRecorder`) is shared with the closed-loop training
-trials of :mod:`stucco_drake.training`.
+trials of :mod:`stucco_drake.training`; with ``probe``, :func:`record_episode` follows the
+prescribed actions with guarded probes of the target (``table --policy probe``).
 
 Units: m, rad, s; poses in the world frame.
 """
@@ -34,6 +35,7 @@ from stucco_drake.bor.diagram import (
 from stucco_drake.bor.episode import make_bor_simulator, run_episode
 from stucco_drake.bor.grasp import build_grasp_scene, estimate_clutter, grasp_at_pose
 from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.probing import ProbeParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sets import PAPER_SCENES, scene_set
@@ -206,25 +208,40 @@ def record_episode(
     action_noise: float = ACTION_NOISE,
     n_actions: int | None = None,
     method: str = "stucco",
+    tracker_params=None,
+    dx_model: str = "ee",
+    probe: ProbeParams | None = None,
 ) -> EpisodeLog:
     """Simulates ``scene`` once with run ``seed``'s perturbed actions and logs it.
 
-    The BOR Diagram runs with ``method`` (its live tracking result goes to ``info["live"]``
-    for reference; the log's observations do not depend on it). Every random stream derives
-    from ``seed``. Returns the log; the plant's final [q; v] is its ``final_state``.
+    The BOR Diagram runs with ``method`` (``tracker_params``, ``dx_model``; its live tracking
+    result goes to ``info["live"]`` for reference; the log's observations do not depend on it
+    unless ``probe`` is given). With ``probe``, the prescribed actions are followed by the
+    probes of :class:`~stucco_drake.systems.probe_policy.ProbePolicy`, chosen from that live
+    tracking's pose hypotheses; ``info["policy"]`` says how many actions were prescribed,
+    probed, and how many probes touched. Every random stream derives from ``seed``. Returns
+    the log; the plant's final [q; v] is its ``final_state``.
     """
     base = load_scene(scene) if isinstance(scene, str) else scene
     scene = perturbed_scene(base, seed, action_noise)
-    bor = build_bor_diagram(scene, method, seed)
+    bor = build_bor_diagram(scene, method, seed, tracker_params=tracker_params,
+                            dx_model=dx_model, probe=probe)
     simulator = make_bor_simulator(bor)
     recorder = EpisodeRecorder(bor, simulator.get_mutable_context())
     result = run_episode(scene, method, seed, n_actions, bor=bor, simulator=simulator,
                          on_action=recorder.on_action)
-    return recorder.log(base.name, seed, action_noise, {
+    info = {
         "wall_time_s": float(result.wall_time_s),
         "kernels": kernels.status(),  # "pinned": the same log on any machine (runtime/kernels.py)
         "live": {"method": method, "ce_cm": float(result.ce_cm), "fmi": float(result.fmi)},
-    })
+    }
+    if probe is not None:
+        context = bor.policy.GetMyContextFromRoot(simulator.get_context())
+        probing = bor.policy.probe_state(context).policy
+        info["policy"] = {"name": "probe", "prescribed_actions": len(scene.actions),
+                          "probe_actions": probing.actions, "touches": probing.touches,
+                          "probes": probing.probes_done, "bumps": probing.bumps}
+    return recorder.log(base.name, seed, action_noise, info)
 
 
 # ------------------------------------------------------------------------------- replaying
@@ -307,13 +324,28 @@ BOR_SOURCES = {
 
 
 # ------------------------------------------------------------------ scene files in the table
-def record_scene_file(path: str, name: str, seed: int) -> EpisodeLog:
-    """:func:`record_episode` of the scene file at ``path``, which must be the scene ``name``
-    (the table's key for it)."""
+def record_scene_file(path: str, name: str, seed: int, **record) -> EpisodeLog:
+    """:func:`record_episode` (with ``record``'s keywords) of the scene ``path`` (a scene file
+    or a scene's name), which must be the scene ``name`` (the table's key for it)."""
     scene = load_scene(path)
     if scene.name != name:
         raise ValueError(f"{path} holds scene {scene.name!r}, not {name!r}")
-    return record_episode(scene, seed)
+    return record_episode(scene, seed, **record)
+
+
+def probe_source(source: EpisodeSource, name: str, stucco_params, dx_model: str) -> EpisodeSource:
+    """``source`` with its episodes recorded with the probes after the prescribed actions
+    (:func:`record_episode` with ``probe``; the live tracker STUCCO with ``stucco_params``,
+    None: the scene's, under ``dx_model``); ValueError for a scene with no target to grasp."""
+    if source.grasp is None:
+        raise ValueError(f"--policy probe: scene {name} has no target to grasp")
+    return dataclasses.replace(source, produce=functools.partial(
+        record_scene_file, source.scene_file or name, tracker_params=stucco_params,
+        dx_model=dx_model, probe=ProbeParams()))
+
+
+#: The closed-loop policies ``stucco-drake table --policy`` offers besides ``prescribed``.
+POLICIES = {"probe": probe_source}
 
 
 def scene_file_source(path: str | Path, scene: SceneFile) -> EpisodeSource:

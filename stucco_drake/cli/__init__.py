@@ -14,8 +14,7 @@ import time
 import numpy as np
 
 from stucco_drake.bor.cli import add_diagram_command, add_run_command
-from stucco_drake.bor.log import BOR_SOURCES, table_scenes
-from stucco_drake.bor.probe_episode import POLICIES
+from stucco_drake.bor.log import BOR_SOURCES, POLICIES, table_scenes
 from stucco_drake.cli.estimates import add_estimates_command
 from stucco_drake.cli.scenes import add_scenes_command
 from stucco_drake.cli.sweep import add_sweep_command

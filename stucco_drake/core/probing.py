@@ -22,6 +22,7 @@ gripper's footprint is given as points in W axes about its origin (its yaw is fi
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import itertools
 from collections.abc import Callable
@@ -226,6 +227,13 @@ class FaceProbePolicy:
         self._probe_bumps = 0
         self._phase, self._probe, self._waypoints = "plan", None, []
         self._last_phase, self._last_xy, self._last_step = "", None, np.zeros(2)
+
+    def copy(self) -> FaceProbePolicy:
+        """A copy whose play does not change this one (the settings, shape and footprint are
+        shared, read only)."""
+        other = copy.copy(self)
+        other._waypoints = list(self._waypoints)
+        return other
 
     def next_step(self, gripper_xy, in_contact: bool, pose) -> np.ndarray | None:
         """The next action's step (m, W), or None when done (see the class docstring)."""

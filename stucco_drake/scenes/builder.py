@@ -331,11 +331,8 @@ def _add_actions(builder: DiagramBuilder, scene: SceneFile, ctrl,
     if external_actions:
         builder.ExportInput(ctrl.GetInputPort("planar_step"), "planar_step")
         return None
-    steps = np.clip(np.asarray(scene.actions, dtype=float).reshape(-1, 2), -1, 1)
     sequence = builder.AddNamedSystem(
-        "action_sequence",
-        PlanarActionSequence(steps * scene.control.max_step, scene.action_duration),
-    )
+        "action_sequence", PlanarActionSequence(scene.planar_steps(), scene.action_duration))
     builder.Connect(sequence.GetOutputPort("planar_step"), ctrl.GetInputPort("planar_step"))
     builder.ExportOutput(sequence.GetOutputPort("action_index"), "action_index")
     return sequence

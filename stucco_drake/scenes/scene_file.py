@@ -16,6 +16,7 @@ import dataclasses
 import math
 from pathlib import Path
 
+import numpy as np
 from pydrake.common.yaml import yaml_load_typed
 from pydrake.multibody.parsing import ModelDirective
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -218,6 +219,12 @@ class SceneFile:
     def tracker_params(self) -> SoftTrackingParams:
         """The tracker parameters: ``tracker`` overrides on top of ``tracker_preset``."""
         return SoftTrackingParams.from_mapping(dict(self.tracker), preset=self.tracker_preset)
+
+    def planar_steps(self) -> np.ndarray:
+        """(N, 2) the prescribed actions as planar steps (m, world): each clipped to [-1, 1]
+        per axis and scaled by ``control.max_step``."""
+        actions = np.asarray(self.actions, dtype=float).reshape(-1, 2)
+        return np.clip(actions, -1, 1) * self.control.max_step
 
     def in_workspace(self, xy) -> bool:
         """Whether planar point ``xy`` (m, world) is inside ``workspace`` and within ``reach``."""

@@ -8,7 +8,6 @@ where the gripper is.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 
 import numpy as np
@@ -28,6 +27,12 @@ class ProbeState:
     policy: FaceProbePolicy
     decided: int = -1
     step: np.ndarray | None = None
+
+    def __deepcopy__(self, memo):
+        # Drake copies abstract state on every update and clone: copy the policy's play, not
+        # the scene its workspace test belongs to.
+        return ProbeState(self.policy.copy(), self.decided,
+                          None if self.step is None else self.step.copy())
 
 
 class ProbePolicy(LeafSystem):
@@ -64,6 +69,7 @@ class ProbePolicy(LeafSystem):
         self._duration = float(duration)
         self._body = int(gripper_frame.body().index())
         self._X_BG = gripper_frame.GetFixedPoseInBodyFrame()
+        self._max_actions = int(policy.params.max_actions)
         self._poses = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()]))
         self._verdict = self.DeclareAbstractInputPort(
@@ -71,10 +77,15 @@ class ProbePolicy(LeafSystem):
         self._hypotheses = self.DeclareAbstractInputPort(
             "pose_hypotheses", AbstractValue.Make(None))
         self._state = self.DeclareAbstractState(
-            AbstractValue.Make(ProbeState(copy.deepcopy(policy))))
+            AbstractValue.Make(ProbeState(policy.copy())))
         self.DeclareVectorOutputPort("planar_step", 2, self.calc_planar_step)
         self.DeclareVectorOutputPort("probing_done", 1, self.calc_probing_done)
         self.DeclarePeriodicUnrestrictedUpdateEvent(self._duration, 0.0, self._on_action_start)
+
+    @property
+    def max_actions(self) -> int:
+        """The most actions the policy plays after the prescribed ones."""
+        return self._max_actions
 
     def _action(self, context) -> int:
         # The action sequence's tolerance: t = k * duration, in floating point, counts as k.
@@ -90,7 +101,8 @@ class ProbePolicy(LeafSystem):
             return ProbeState(state.policy, k, self._prescribed[k].copy())
         if state.step is None and state.decided >= len(self._prescribed):
             return ProbeState(state.policy, k, None)
-        policy = copy.deepcopy(state.policy)
+        # The output computes the step without changing the state: play on a copy.
+        policy = state.policy.copy()
         X_WG = self._poses.Eval(context)[self._body] @ self._X_BG
         verdict = self._verdict.Eval(context)
         step = policy.next_step(X_WG.translation()[:2], bool(verdict.in_contact),
