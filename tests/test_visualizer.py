@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 from PIL import Image
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import Meshcat, MeshcatParams
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
@@ -29,19 +28,6 @@ from stucco_drake.systems.contact_tracking_visualizer import (
 
 BOX = BoxSdf((0.08, 0.105, 0.03))  # about the FB cracker box, lying flat (m)
 X_WO = RigidTransform(RotationMatrix.MakeZRotation(0.3), [0.15, 0.05, 0.10])
-
-
-@pytest.fixture
-def meshcat(monkeypatch):
-    """A Meshcat on an ephemeral port of this machine only (no browser connects to it).
-
-    Drake refuses to start Meshcat when DRAKE_ALLOW_NETWORK is set without ``meshcat``; a
-    localhost-only server is within the spirit of such a policy, so the test allows it.
-    """
-    allowed = os.environ.get("DRAKE_ALLOW_NETWORK")
-    if allowed is not None and "meshcat" not in allowed.split(":"):
-        monkeypatch.setenv("DRAKE_ALLOW_NETWORK", "meshcat")
-    return Meshcat(MeshcatParams(host="localhost", port=0))
 
 
 def unpack(raw: bytes):

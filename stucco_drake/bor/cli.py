@@ -47,10 +47,12 @@ def add_run_command(subparsers) -> None:
     run.add_argument("--stucco-params", metavar="PARAMS.yaml", default=None,
                      help="STUCCO's parameters (YAML, fields of SoftTrackingParams over Table "
                           "I's sim preset; default: the scene's)")
-    run.add_argument("--policy", choices=("prescribed", "probe"), default="prescribed",
-                     help="what chooses the actions: the scene's prescribed list (default), or "
-                          "after it 'probe': guarded touches of the target where the live "
-                          "pose hypotheses put it")
+    run.add_argument("--policy", choices=("prescribed", "probe", "belief", "sweep"),
+                     default="prescribed",
+                     help="what chooses the actions: the scene's prescribed list (default); "
+                          "'probe': after it, guarded touches of the target where the live "
+                          "pose hypotheses put it; 'belief': rummaging chosen from the belief, "
+                          "stopping once the target is known; 'sweep': a coverage raster")
     run.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
     run.add_argument("--record", metavar="OUT.html",
                      help="save a standalone Meshcat HTML recording of the run")
@@ -79,7 +81,8 @@ def _grasp_hook(enabled: bool):
 def run_bor(args: argparse.Namespace) -> int:
     from stucco_drake.bor.diagram import build_bor_diagram
     from stucco_drake.bor.episode import run_episode
-    from stucco_drake.core.probing import ProbeParams
+    from stucco_drake.bor.log import POLICY_SETTINGS
+    from stucco_drake.bor.policies import coverage_scene
     from stucco_drake.scenes import load_scene, scene_paths
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 
@@ -97,10 +100,12 @@ def run_bor(args: argparse.Namespace) -> int:
     meshcat = start_meshcat(args.meshcat, record)
     for scene in scenes:
         bor = None
-        if args.policy == "probe":
+        if args.policy == "sweep":
+            scene = coverage_scene(scene)
+        elif args.policy != "prescribed":
             bor = build_bor_diagram(scene, args.method, args.seed, meshcat=meshcat,
                                     tracker_params=params, dx_model=args.dx_model,
-                                    probe=ProbeParams())
+                                    policy=POLICY_SETTINGS[args.policy]())
         result = run_episode(scene, args.method, args.seed, args.actions, bor=bor,
                              meshcat=meshcat, grasp=_grasp_hook(not args.no_grasp),
                              dx_model=args.dx_model, tracker_params=params)

@@ -26,9 +26,9 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from stucco_drake.bor.grasp import build_grasp_scene
+from stucco_drake.bor.policies import PolicySettings, add_policy
 from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.penetration import RobotPenetration
-from stucco_drake.core.probing import FaceProbePolicy, ProbeParams, gripper_footprint
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.robot.gripper_sdf import gripper_penetration
 from stucco_drake.robot.models import bubble_bodies, iiwa_observed_robot_arguments
@@ -47,7 +47,8 @@ from stucco_drake.systems.contact_tracking_visualizer import ContactTrackingVisu
 from stucco_drake.systems.contact_truth import RobotObjectContacts as PlantContacts
 from stucco_drake.systems.observed_robot import ObservedRobot
 from stucco_drake.systems.planar_controller import ActionClock
-from stucco_drake.systems.probe_policy import ProbePolicy
+from stucco_drake.systems.policy_visualizer import PolicyVisualizer
+from stucco_drake.systems.rummaging_policy import RummagingPolicy
 from stucco_drake.systems.soft_tracking_filter import SoftTrackingFilter
 from stucco_drake.systems.target_pose_estimator import TargetPoseEstimator
 from stucco_drake.systems.wrench_estimator import ExternalWrenchEstimator
@@ -68,9 +69,9 @@ class BorDiagram:
         estimator, detector, isolator, bubble_sensor, assembler, tracking, target_estimator:
             the systems.
         truth: the assembler's ground-truth labeller (:class:`RobotObjectContacts`).
-        policy: the :class:`~stucco_drake.systems.probe_policy.ProbePolicy` choosing the
-            actions (None: the scene's prescribed list plays); the Diagram then exports its
-            ``probing_done``.
+        policy: the :class:`~stucco_drake.systems.rummaging_policy.RummagingPolicy` choosing
+            the actions (None: the scene's prescribed list plays); the Diagram then exports
+            its ``policy_done``.
     """
 
     diagram: Diagram
@@ -88,7 +89,7 @@ class BorDiagram:
     tracking: SoftTrackingFilter
     target_estimator: TargetPoseEstimator
     truth: RobotObjectContacts
-    policy: ProbePolicy | None = None
+    policy: RummagingPolicy | None = None
 
 
 # ------------------------------------------------------------------------- scene geometry
@@ -201,7 +202,7 @@ def build_bor_diagram(
     estimator_gain: float = 50.0,
     dx_model: str = "ee",
     external_actions: bool = False,
-    probe: ProbeParams | None = None,
+    policy: PolicySettings | None = None,
 ) -> BorDiagram:
     """Builds the BOR Diagram of ``scene`` (a SceneFile or a scene name) with ``method``.
 
@@ -219,17 +220,18 @@ def build_bor_diagram(
             ``"cone"`` (see :class:`~stucco_drake.systems.soft_tracking_filter.SoftTrackingFilter`).
         external_actions: export a ``planar_step`` input, (dx, dy) in m (world), read at the
             start of each action, instead of playing ``scene.actions`` (closed-loop policies).
-        probe: play ``scene.actions``, then probe the target's likeliest pose with these
-            settings (:class:`~stucco_drake.systems.probe_policy.ProbePolicy`); None: the
-            actions alone.
+        policy: what chooses the actions besides ``scene.actions`` (see
+            :mod:`stucco_drake.bor.policies`): ProbeParams, the actions then probes of the
+            target's likeliest pose; RummageParams, rummaging chosen from the belief from
+            the start; None: the actions alone.
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
     # The grasp executor sits in the scene from the start (transparent until a grasp starts),
     # so the grasp continues this very simulation and shows in its recording.
-    if probe is not None and external_actions:
-        raise ValueError("build_bor_diagram: probe and external_actions exclude each other")
+    if policy is not None and external_actions:
+        raise ValueError("build_bor_diagram: policy and external_actions exclude each other")
     built = build_grasp_scene(scene, meshcat=meshcat,
-                              external_actions=external_actions or probe is not None)
+                              external_actions=external_actions or policy is not None)
     h = float(scene.plant.time_step)
     fingers = np.full(2, scene.gripper_start.finger_position)
     X_WB = robot_base_pose(scene)
@@ -245,8 +247,8 @@ def build_bor_diagram(
     noise = scene.sensor_noise
     torque_seed, bubble_seed = _noise_seeds(seed)
     observer, stats = _observer_settings(scene, h, estimator_gain, torque_seed)
-    action_index = _action_index(builder, sub, scene, external_actions or probe is not None,
-                                 export=probe is None)
+    action_index = _action_index(builder, sub, scene, external_actions or policy is not None,
+                                 export=policy is None)
     robot = ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))
     truth = RobotObjectContacts(built)
     chain = add_contact_tracking(
@@ -264,10 +266,12 @@ def build_bor_diagram(
         truth=truth, truth_state=sub.GetOutputPort("plant_state"), dx_model=dx_model,
     )  # fmt: skip
     tracking, target, assembler = chain.tracking, chain.target_estimator, chain.assembler
-    policy = None if probe is None else _add_probe_policy(builder, sub, built, chain, probe,
-                                                      penetration)
+    chooser = None if policy is None else add_policy(builder, sub, built, chain, policy,
+                                                     penetration, shape)
     if meshcat is not None:
         _add_drawing(builder, meshcat, shape, chain)
+        if chooser is not None:
+            _add_policy_drawing(builder, meshcat, shape, chain, chooser)
     for name, port in chain.outputs.items():
         if name != "ee_pose":
             builder.ExportOutput(port, name)
@@ -275,7 +279,7 @@ def build_bor_diagram(
     diagram.set_name(f"bor_{scene.name}_{method}")
     return BorDiagram(diagram, built, method, int(seed), scene.target, shape, penetration,
                       chain.estimator, chain.detector, chain.isolator, chain.bubble_sensor,
-                      assembler, tracking, target, truth, policy)  # fmt: skip
+                      assembler, tracking, target, truth, chooser)  # fmt: skip
 
 
 def _observer_settings(scene: SceneFile, h: float, gain: float, noise_seed: int):
@@ -307,28 +311,13 @@ def _action_index(builder: DiagramBuilder, sub, scene: SceneFile, external_actio
     return clock.get_output_port()
 
 
-def _add_probe_policy(builder: DiagramBuilder, sub, built: BuiltScene, chain, probe: ProbeParams,
-                      penetration: RobotPenetration) -> ProbePolicy:  # fmt: skip
-    """The policy playing the scene's actions then probing the target, fed by the plant's body
-    poses, the detector's verdict and the pose hypotheses; its step drives the scene."""
-    scene = built.scene
-    max_step = float(scene.control.max_step)
-    frame = built.gripper_frame()
-    # The footprint at the start pose: the gripper's yaw is held for the whole episode.
-    R_WE = frame.CalcPoseInWorld(built.plant.CreateDefaultContext()).rotation().matrix()
-    footprint = gripper_footprint(penetration, R_WE)
-    probing = FaceProbePolicy(target_shape(built), footprint, max_step, probe,
-                              in_workspace=scene.in_workspace)
-    policy = builder.AddNamedSystem(
-        "probe_policy", ProbePolicy(scene.planar_steps(), scene.action_duration, frame, probing))
-    builder.Connect(sub.GetOutputPort("body_poses"), policy.GetInputPort("body_poses"))
-    builder.Connect(chain.detector.GetOutputPort("current_action"),
-                    policy.GetInputPort("current_action"))
+def _add_policy_drawing(builder: DiagramBuilder, meshcat, shape, chain, chooser) -> None:
+    """The policy's push and the pose hypotheses drawn to ``meshcat`` every 0.05 s."""
+    drawing = builder.AddNamedSystem("policy_visualizer", PolicyVisualizer(meshcat, shape, 0.05))
+    builder.Connect(chooser.GetOutputPort("planar_step"), drawing.GetInputPort("planar_step"))
+    builder.Connect(chain.outputs["ee_pose"], drawing.GetInputPort("ee_pose"))
     builder.Connect(chain.target_estimator.GetOutputPort("pose_hypotheses"),
-                    policy.GetInputPort("pose_hypotheses"))
-    builder.Connect(policy.GetOutputPort("planar_step"), sub.GetInputPort("planar_step"))
-    builder.ExportOutput(policy.GetOutputPort("probing_done"), "probing_done")
-    return policy
+                    drawing.GetInputPort("pose_hypotheses"))
 
 
 def _add_drawing(builder: DiagramBuilder, meshcat, shape, chain) -> None:

@@ -180,8 +180,8 @@ def run_episode(
 ) -> EpisodeResult:
     """Plays the first ``n_actions`` actions of ``scene`` (all by default) through the BOR
     Diagram (``bor``, or one built for ``method`` and ``seed``), then scores the tracking.
-    A Diagram with a policy (``bor.policy``) plays until the policy stops (at most the
-    prescribed actions plus its ``max_actions``).
+    A Diagram with a policy (``bor.policy``) plays until the policy stops (at most its
+    ``max_actions``: any prescribed ones and its own budget).
     ``simulator`` (of ``bor.diagram`` at time 0, default :func:`make_bor_simulator`) may be
     given, e.g. to clone its context midway.
 
@@ -194,9 +194,7 @@ def run_episode(
     scene = load_scene(scene) if isinstance(scene, str) else scene
     bor = bor or build_bor_diagram(scene, method, seed, tracker_params=tracker_params,
                                    meshcat=meshcat, dx_model=dx_model)
-    total = len(scene.actions)
-    if bor.policy is not None:  # the policy may play more than the prescribed actions
-        total += bor.policy.max_actions
+    total = len(scene.actions) if bor.policy is None else bor.policy.max_actions
     n_actions = total if n_actions is None else min(int(n_actions), total)
     if simulator is None:
         simulator = make_bor_simulator(bor)
@@ -213,7 +211,7 @@ def run_episode(
         counts.append(len(contacts.points))
         if on_action is not None:
             on_action(k, contacts)
-        if bor.policy is not None and bor.diagram.GetOutputPort("probing_done").Eval(context)[0]:
+        if bor.policy is not None and bor.diagram.GetOutputPort("policy_done").Eval(context)[0]:
             n_actions = k + 1  # the policy has stopped: no action k + 1
             break
     wall = time.perf_counter() - start

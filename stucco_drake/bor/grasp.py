@@ -247,9 +247,11 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     diagram, plant = built.diagram, built.plant
     context = simulator.get_mutable_context()
     if diagram.HasInputPort("planar_step"):
+        # The scene may sit inside a larger Diagram (the BOR Diagram, whose policy feeds it).
+        own = diagram.GetMyMutableContextFromRoot(context)
         port = diagram.GetInputPort("planar_step")
-        if not port.HasValue(context):
-            port.FixValue(context, np.zeros(2))  # the planar controller just holds its place
+        if not port.HasValue(own):
+            port.FixValue(own, np.zeros(2))  # the planar controller just holds its place
     executor = diagram.GetSubsystemByName(EXECUTOR_NAME)
     target = built.free_bodies[built.scene.target]
     plant_context = plant.GetMyContextFromRoot(context)

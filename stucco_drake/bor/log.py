@@ -9,8 +9,8 @@ every object and the gripper's distance to each; at the end the plant's state. R
 log (:func:`stucco_drake.eval.replay.replay`) needs the gripper's pxpen
 (:func:`log_penetration`) and grasps from the logged final state (:func:`grasp_from_log`).
 The recording itself (:class:`EpisodeRecorder`) is shared with the closed-loop training
-trials of :mod:`stucco_drake.training`; with ``probe``, :func:`record_episode` follows the
-prescribed actions with guarded probes of the target (``table --policy probe``).
+trials of :mod:`stucco_drake.training`; with ``policy``, :func:`record_episode` lets a policy
+of :mod:`stucco_drake.bor.policies` choose the actions (``table --policy probe|belief|sweep``).
 
 Units: m, rad, s; poses in the world frame.
 """
@@ -34,8 +34,11 @@ from stucco_drake.bor.diagram import (
 )
 from stucco_drake.bor.episode import make_bor_simulator, run_episode
 from stucco_drake.bor.grasp import build_grasp_scene, estimate_clutter, grasp_at_pose
+from stucco_drake.bor.policies import PolicySettings, coverage_scene, policy_info
+from stucco_drake.core.coverage import CoverageParams
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.probing import ProbeParams
+from stucco_drake.core.rummaging import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sets import PAPER_SCENES, scene_set
@@ -210,22 +213,27 @@ def record_episode(
     method: str = "stucco",
     tracker_params=None,
     dx_model: str = "ee",
-    probe: ProbeParams | None = None,
+    policy: PolicySettings | CoverageParams | None = None,
 ) -> EpisodeLog:
     """Simulates ``scene`` once with run ``seed``'s perturbed actions and logs it.
 
     The BOR Diagram runs with ``method`` (``tracker_params``, ``dx_model``; its live tracking
     result goes to ``info["live"]`` for reference; the log's observations do not depend on it
-    unless ``probe`` is given). With ``probe``, the prescribed actions are followed by the
-    probes of :class:`~stucco_drake.systems.probe_policy.ProbePolicy`, chosen from that live
-    tracking's pose hypotheses; ``info["policy"]`` says how many actions were prescribed,
-    probed, and how many probes touched. Every random stream derives from ``seed``. Returns
-    the log; the plant's final [q; v] is its ``final_state``.
+    unless a ``policy`` is given). ``policy`` (:mod:`stucco_drake.bor.policies`): ProbeParams,
+    the prescribed actions followed by probes of the target chosen from that live tracking's
+    pose hypotheses; RummageParams, rummaging chosen from them from the first action;
+    CoverageParams, the coverage sweep's raster instead of the prescribed actions. With a
+    policy in the Diagram, ``info["policy"]`` says what it did
+    (:func:`~stucco_drake.bor.policies.policy_info`). Every random stream derives from
+    ``seed``. Returns the log; the plant's final [q; v] is its ``final_state``.
     """
     base = load_scene(scene) if isinstance(scene, str) else scene
+    if isinstance(policy, CoverageParams):
+        base = coverage_scene(base, policy)
+        policy = None
     scene = perturbed_scene(base, seed, action_noise)
     bor = build_bor_diagram(scene, method, seed, tracker_params=tracker_params,
-                            dx_model=dx_model, probe=probe)
+                            dx_model=dx_model, policy=policy)
     simulator = make_bor_simulator(bor)
     recorder = EpisodeRecorder(bor, simulator.get_mutable_context())
     result = run_episode(scene, method, seed, n_actions, bor=bor, simulator=simulator,
@@ -235,12 +243,9 @@ def record_episode(
         "kernels": kernels.status(),  # "pinned": the same log on any machine (runtime/kernels.py)
         "live": {"method": method, "ce_cm": float(result.ce_cm), "fmi": float(result.fmi)},
     }
-    if probe is not None:
-        context = bor.policy.GetMyContextFromRoot(simulator.get_context())
-        probing = bor.policy.probe_state(context).policy
-        info["policy"] = {"name": "probe", "prescribed_actions": len(scene.actions),
-                          "probe_actions": probing.actions, "touches": probing.touches,
-                          "probes": probing.probes_done, "bumps": probing.bumps}
+    if bor.policy is not None:
+        info["policy"] = policy_info(bor.policy, bor.policy.GetMyContextFromRoot(
+            simulator.get_context()), len(scene.actions))
     return recorder.log(base.name, seed, action_noise, info)
 
 
@@ -333,19 +338,26 @@ def record_scene_file(path: str, name: str, seed: int, **record) -> EpisodeLog:
     return record_episode(scene, seed, **record)
 
 
-def probe_source(source: EpisodeSource, name: str, stucco_params, dx_model: str) -> EpisodeSource:
-    """``source`` with its episodes recorded with the probes after the prescribed actions
-    (:func:`record_episode` with ``probe``; the live tracker STUCCO with ``stucco_params``,
-    None: the scene's, under ``dx_model``); ValueError for a scene with no target to grasp."""
+#: The settings of each closed-loop policy ``stucco-drake table --policy`` offers besides
+#: ``prescribed`` (see :mod:`stucco_drake.bor.policies`).
+POLICY_SETTINGS = {"probe": ProbeParams, "belief": RummageParams, "sweep": CoverageParams}
+
+
+def policy_source(source: EpisodeSource, name: str, stucco_params, dx_model: str,
+                  policy: str) -> EpisodeSource:  # fmt: skip
+    """``source`` with its episodes recorded under the policy named ``policy`` (a key of
+    :data:`POLICY_SETTINGS`, at its defaults; :func:`record_episode`, the live tracker STUCCO
+    with ``stucco_params``, None: the scene's, under ``dx_model``); ValueError for a scene
+    with no target to grasp."""
     if source.grasp is None:
-        raise ValueError(f"--policy probe: scene {name} has no target to grasp")
+        raise ValueError(f"--policy {policy}: scene {name} has no target to grasp")
     return dataclasses.replace(source, produce=functools.partial(
         record_scene_file, source.scene_file or name, tracker_params=stucco_params,
-        dx_model=dx_model, probe=ProbeParams()))
+        dx_model=dx_model, policy=POLICY_SETTINGS[policy]()))
 
 
 #: The closed-loop policies ``stucco-drake table --policy`` offers besides ``prescribed``.
-POLICIES = {"probe": probe_source}
+POLICIES = {name: functools.partial(policy_source, policy=name) for name in POLICY_SETTINGS}
 
 
 def scene_file_source(path: str | Path, scene: SceneFile) -> EpisodeSource:

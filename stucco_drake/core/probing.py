@@ -130,7 +130,7 @@ def plan_probes(pose, shape: BoxSdf | CylinderSdf, gripper_xy, params: ProbePara
     return probes
 
 
-def _segment_enters_box(a, b, centre, half, yaw) -> bool:
+def segment_enters_box(a, b, centre, half, yaw) -> bool:
     """Whether the segment a-b (W) passes through the interior of the box (centre, half
     extents, yaw), by clipping it against the box's slabs in the box's frame."""
     R = _rotation(yaw)
@@ -153,7 +153,7 @@ def travel_waypoints(start, goal, centre, half, yaw) -> list[np.ndarray]:
     yaw): straight when the segment clears it, else around its corners the shorter way; from
     a start inside or on the box, out through its nearest side first."""
     start, goal = np.asarray(start, dtype=np.float64), np.asarray(goal, dtype=np.float64)
-    if not _segment_enters_box(start, goal, centre, half, yaw):
+    if not segment_enters_box(start, goal, centre, half, yaw):
         return [goal]
     R = _rotation(yaw)
     local = R.T @ (start - centre)
@@ -168,12 +168,12 @@ def travel_waypoints(start, goal, centre, half, yaw) -> list[np.ndarray]:
     corners = centre + (signs * (half + 1e-3)) @ R.T
     best, best_length = [goal], np.inf
     for first in range(4):
-        if _segment_enters_box(start, corners[first], centre, half, yaw):
+        if segment_enters_box(start, corners[first], centre, half, yaw):
             continue
         for direction in (1, -1):
             path, k = [corners[first]], first
             for _ in range(4):
-                if not _segment_enters_box(path[-1], goal, centre, half, yaw):
+                if not segment_enters_box(path[-1], goal, centre, half, yaw):
                     break
                 k = (k + direction) % 4
                 path.append(corners[k])
@@ -199,8 +199,9 @@ class FaceProbePolicy:
     """Plans and plays the probes, one planar step per action (see the module's docstring).
 
     Call :meth:`next_step` at the start of every action with where the gripper is, whether
-    the action just finished sensed contact, and the likeliest target pose now (or None, or a
-    function returning either, called only when a probe is planned: hypotheses are costly); it
+    the action just finished sensed contact, and the likeliest target pose now (or pose
+    hypotheses, whose ``pose`` is taken, or None, or a function returning any of them, called
+    only when a probe is planned: hypotheses are costly); it
     returns the step (2,) (m, W) or None when probing is over. The probes are re-planned from
     the pose given at the start of each, and the k-th probe of that plan is made.
 
@@ -252,6 +253,7 @@ class FaceProbePolicy:
         for _ in range(8):  # phase changes within one decision; a handful suffice
             if self._phase == "plan":
                 pose = pose() if callable(pose) else pose
+                pose = getattr(pose, "pose", pose)  # pose hypotheses: their likeliest
                 if pose is None or not self._plan(xy, pose):
                     return None
             elif self._phase == "travel":

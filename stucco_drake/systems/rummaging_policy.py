@@ -1,9 +1,11 @@
-"""ProbePolicy: the planar step of every action, prescribed first, then guarded probes.
+"""RummagingPolicy: the planar step of every action, chosen from what the robot has felt.
 
-A thin wrapper around :class:`~stucco_drake.core.probing.FaceProbePolicy`: it plays a list of
-prescribed steps, then touches the faces of the likeliest target pose of the pose hypotheses,
-each step decided at its action's start from the detector's verdict on the action before and
-where the gripper is.
+A thin wrapper around a policy of :mod:`stucco_drake.core`: it plays a list of prescribed
+steps (possibly none), then the policy's, each decided at its action's start from the
+detector's verdict on the action before, where the gripper is and the target-pose hypotheses:
+:class:`~stucco_drake.core.probing.FaceProbePolicy` (guarded probes of the likeliest target
+pose, after a prescribed script) or :class:`~stucco_drake.core.rummaging.BeliefRummagingPolicy`
+(lanes explored until the target is felt, probed, and known).
 """
 
 from __future__ import annotations
@@ -17,27 +19,31 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from stucco_drake.core.detection import ActionContact
 from stucco_drake.core.probing import FaceProbePolicy
+from stucco_drake.core.rummaging import BeliefRummagingPolicy
+
+PlanarPolicy = FaceProbePolicy | BeliefRummagingPolicy
 
 
 @dataclasses.dataclass
-class ProbeState:
-    """Abstract state: the probing policy as of the last decided action, that action's
-    index (-1: none yet) and its step (m, world), None once probing is over."""
+class PolicyState:
+    """Abstract state: the policy as of the last decided action, that action's index (-1:
+    none yet) and its step (m, world), None once the policy has stopped."""
 
-    policy: FaceProbePolicy
+    policy: PlanarPolicy
     decided: int = -1
     step: np.ndarray | None = None
 
     def __deepcopy__(self, memo):
         # Drake copies abstract state on every update and clone: copy the policy's play, not
         # the scene its workspace test belongs to.
-        return ProbeState(self.policy.copy(), self.decided,
-                          None if self.step is None else self.step.copy())
+        return PolicyState(self.policy.copy(), self.decided,
+                           None if self.step is None else self.step.copy())
 
 
-class ProbePolicy(LeafSystem):
+class RummagingPolicy(LeafSystem):
     """Source of the planar step of every action (m, world frame): ``prescribed`` steps, then
-    the probes of :class:`~stucco_drake.core.probing.FaceProbePolicy`.
+    ``policy``'s (any object with ``next_step(gripper_xy, in_contact, hypotheses)``,
+    ``copy()`` and ``params.max_actions``, as the policies of the module docstring).
 
     The step of action k is decided at t = k ``duration`` (its start), from the inputs then:
     the output computes it from the state of action k-1 without changing anything, and the
@@ -49,21 +55,21 @@ class ProbePolicy(LeafSystem):
         current_action: the detector's :class:`ActionContact` of the action under way (at an
             action's start: of the action that just ended).
         pose_hypotheses: the target-pose estimator's hypotheses (None: none yet); evaluated
-            only when a probe is planned.
+            only when the policy asks (they are costly).
 
     Output ports:
-        planar_step: (dx, dy) of the action under way (m, world); zeros once probing is over.
-        probing_done: 1-vector, 1.0 once the policy has stopped (no action is under way).
+        planar_step: (dx, dy) of the action under way (m, world); zeros once stopped.
+        policy_done: 1-vector, 1.0 once the policy has stopped (no action is under way).
 
     Args:
         prescribed: (N, 2) the steps played first (m, world).
         duration: the actions' duration (s).
         gripper_frame: the plant's frame whose origin the steps move (its pose from
             ``body_poses`` and its fixed offset in its body).
-        policy: the probing policy, played after the prescribed steps (its state is copied).
+        policy: the policy played after the prescribed steps (its state is copied).
     """
 
-    def __init__(self, prescribed, duration: float, gripper_frame, policy: FaceProbePolicy):
+    def __init__(self, prescribed, duration: float, gripper_frame, policy: PlanarPolicy):
         super().__init__()
         self._prescribed = np.asarray(prescribed, dtype=np.float64).reshape(-1, 2)
         self._duration = float(duration)
@@ -77,41 +83,37 @@ class ProbePolicy(LeafSystem):
         self._hypotheses = self.DeclareAbstractInputPort(
             "pose_hypotheses", AbstractValue.Make(None))
         self._state = self.DeclareAbstractState(
-            AbstractValue.Make(ProbeState(policy.copy())))
+            AbstractValue.Make(PolicyState(policy.copy())))
         self.DeclareVectorOutputPort("planar_step", 2, self.calc_planar_step)
-        self.DeclareVectorOutputPort("probing_done", 1, self.calc_probing_done)
+        self.DeclareVectorOutputPort("policy_done", 1, self.calc_policy_done)
         self.DeclarePeriodicUnrestrictedUpdateEvent(self._duration, 0.0, self._on_action_start)
 
     @property
     def max_actions(self) -> int:
-        """The most actions the policy plays after the prescribed ones."""
-        return self._max_actions
+        """The most actions played in all: the prescribed ones and the policy's budget."""
+        return len(self._prescribed) + self._max_actions
 
     def _action(self, context) -> int:
         # The action sequence's tolerance: t = k * duration, in floating point, counts as k.
         return int(np.floor(context.get_time() / self._duration + 1e-6))
 
-    def _decide(self, context) -> ProbeState:
+    def _decide(self, context) -> PolicyState:
         """The state once the action under way is decided (a copy when it is new)."""
         state = context.get_abstract_state(int(self._state)).get_value()
         k = self._action(context)
         if state.decided == k:
             return state
         if k < len(self._prescribed):
-            return ProbeState(state.policy, k, self._prescribed[k].copy())
+            return PolicyState(state.policy, k, self._prescribed[k].copy())
         if state.step is None and state.decided >= len(self._prescribed):
-            return ProbeState(state.policy, k, None)
+            return PolicyState(state.policy, k, None)
         # The output computes the step without changing the state: play on a copy.
         policy = state.policy.copy()
         X_WG = self._poses.Eval(context)[self._body] @ self._X_BG
         verdict = self._verdict.Eval(context)
         step = policy.next_step(X_WG.translation()[:2], bool(verdict.in_contact),
-                                lambda: self._likeliest_pose(context))
-        return ProbeState(policy, k, None if step is None else np.asarray(step, dtype=float))
-
-    def _likeliest_pose(self, context):
-        hypotheses = self._hypotheses.Eval(context)
-        return None if hypotheses is None else np.asarray(hypotheses.pose)
+                                lambda: self._hypotheses.Eval(context))
+        return PolicyState(policy, k, None if step is None else np.asarray(step, dtype=float))
 
     def _on_action_start(self, context, state):
         state.get_mutable_abstract_state(int(self._state)).set_value(self._decide(context))
@@ -120,9 +122,9 @@ class ProbePolicy(LeafSystem):
         step = self._decide(context).step
         output.SetFromVector(np.zeros(2) if step is None else step)
 
-    def calc_probing_done(self, context, output: BasicVector):
+    def calc_policy_done(self, context, output: BasicVector):
         output.SetFromVector([1.0 if self._decide(context).step is None else 0.0])
 
-    def probe_state(self, context) -> ProbeState:
+    def policy_state(self, context) -> PolicyState:
         """The policy's state (its counters: ``policy.actions``, ``touches``, ...)."""
         return context.get_abstract_state(int(self._state)).get_value()

@@ -1,0 +1,219 @@
+"""Rummaging chosen from the belief: explore until something is felt, probe the likeliest
+target pose, stop once the target is known.
+
+A prescribed script is written for one layout, and a coverage sweep (:mod:`.coverage`) pushes
+through everything whatever it feels. This policy explores the same lanes, but guarded: a push
+that senses contact ends there (the gripper backs off instead of shoving on), and the belief is
+asked what was felt. When the target-pose hypotheses put the target somewhere, a round of
+guarded face probes (:class:`~.probing.FaceProbePolicy`) touches it where they say; when their
+confidence (the posterior probability that the grasp closes with margin) passes
+``stop_confidence`` the policy stops and the robot grasps. Otherwise it goes on with the next
+lane; a lane through the likeliest target is still pushed, guarded: it touches the target's
+near face again (at 30 N the gripper does not shove a 10 kg target away), more evidence where
+it is least certain. It also stops when the lanes or the action budget run out.
+
+Planar points (x, y) in the world frame W (m); the gripper's yaw is fixed.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from stucco_drake.core.coverage import CoverageParams, coverage_waypoints
+from stucco_drake.core.probing import FaceProbePolicy, ProbeParams
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
+
+
+@dataclasses.dataclass(frozen=True)
+class RummageParams:
+    """Settings of :class:`BeliefRummagingPolicy` (m unless noted).
+
+    Attributes:
+        coverage: the lanes explored (the coverage sweep's, the nearest to the start first).
+        probe: the probe rounds' settings (``max_actions``: of one round).
+        stop_confidence: the target confidence at which the policy stops (the confidence from
+            which a run counts as confident, chosen on the development layouts).
+        back_off: step back along -x after a push that sensed contact.
+        arrive_tolerance: distance at which a lane's waypoint counts as reached.
+        max_actions: actions in all.
+        max_rounds: probe rounds in all.
+        lane_bumps: contacts while moving to or from a lane's push before the lane is left.
+        retouch_offsets: where (m, along y from the last touch) a felt object the belief does
+            not place yet is pushed again, one after another, before the lane is left: a
+            single touch leaves too few points for any pose.
+    """
+
+    coverage: CoverageParams = dataclasses.field(
+        default_factory=lambda: CoverageParams(nearest_first=True))
+    probe: ProbeParams = dataclasses.field(default_factory=lambda: ProbeParams(max_actions=30))
+    stop_confidence: float = 0.999
+    back_off: float = 0.02
+    arrive_tolerance: float = 0.005
+    max_actions: int = 120
+    max_rounds: int = 3
+    lane_bumps: int = 2
+    retouch_offsets: tuple[float, ...] = (0.03, -0.06)
+
+
+def _belief_of(belief) -> tuple[np.ndarray | None, float]:
+    """(likeliest pose or None, confidence) of the pose hypotheses ``belief`` (an object with
+    ``pose`` and ``confidence``, None, or a function returning either)."""
+    belief = belief() if callable(belief) else belief
+    if belief is None:
+        return None, 0.0
+    return np.asarray(belief.pose, dtype=np.float64), float(belief.confidence)
+
+
+class BeliefRummagingPolicy:
+    """Plays the rummaging one planar step per action (see the module's docstring).
+
+    Call :meth:`next_step` at the start of every action with where the gripper is, whether
+    the action just finished sensed contact, and the pose hypotheses (an object with ``pose``
+    (x, y, yaw) and ``confidence``, None, or a function returning either: called only after a
+    contact, when a probe is planned or the confidence is needed). It returns the step (2,)
+    (m, W), or None once the policy stops.
+
+    Args:
+        shape: the target's known geometry in its own frame.
+        footprint: (m, 2) points of the gripper's planar footprint about its origin (W axes).
+        max_step: per-axis clip of a step (m), the controller's.
+        start_xy: where the gripper starts (the lanes start and end at its x).
+        params: the settings.
+        in_workspace: whether a planar point (W) is one the gripper may be sent to.
+    """
+
+    def __init__(self, shape: BoxSdf | CylinderSdf, footprint, max_step: float, start_xy,
+                 params: RummageParams | None = None,
+                 in_workspace: Callable[[np.ndarray], bool] | None = None):  # fmt: skip
+        self.shape, self.params = shape, params or RummageParams()
+        self.footprint = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
+        self.max_step = float(max_step)
+        self.in_workspace = in_workspace or (lambda xy: True)
+        width = float(np.ptp(self.footprint[:, 1]))
+        self.lanes = coverage_waypoints(start_xy, self.params.coverage, width,
+                                        self.in_workspace).reshape(-1, 3, 2)
+        self.actions = self.rounds = self.touches = self.contacts = self.bumps = 0
+        self.confidence, self.pose = 0.0, None
+        self._lane, self._lane_bumps, self._retouches = -1, 0, 0
+        # The waypoints ahead: (kind, point), kind "push" (a contact there is felt) or "move".
+        self._queue: list[tuple[str, np.ndarray]] = []
+        self._stopped = False
+        self._probe: FaceProbePolicy | None = None
+        self._last_step, self._moving, self._last_xy = np.zeros(2), False, None
+        self._next_lane()
+
+    def copy(self) -> BeliefRummagingPolicy:
+        """A copy whose play does not change this one (settings, shape, footprint and lanes
+        shared, read only)."""
+        other = copy.copy(self)
+        other._queue = list(self._queue)
+        other._probe = None if self._probe is None else self._probe.copy()
+        return other
+
+    def next_step(self, gripper_xy, in_contact: bool, belief) -> np.ndarray | None:
+        """The next action's step (m, W), or None once stopped (see the class docstring)."""
+        if self.actions >= self.params.max_actions or self._stopped:
+            return None
+        xy = np.asarray(gripper_xy, dtype=np.float64)
+        step = self._decide(xy, bool(in_contact), belief)
+        self._last_xy = xy
+        if step is None:
+            self._stopped = True  # for good
+            return None
+        self.actions += 1
+        self._last_step = np.clip(step, -self.max_step, self.max_step)
+        return self._last_step
+
+    def _believe(self, belief) -> float:
+        self.pose, self.confidence = _belief_of(belief)
+        return self.confidence
+
+    def _decide(self, xy, in_contact: bool, belief):
+        if self._probe is not None:
+            step = self._probe.next_step(xy, in_contact, belief)
+            if step is not None:
+                return step
+            self.touches += self._probe.touches
+            self.bumps += self._probe.bumps
+            self.rounds += 1
+            self._probe = None
+            if self._believe(belief) >= self.params.stop_confidence:
+                return None
+            self._withdraw(xy)
+        elif in_contact and self._moving:
+            self.contacts += 1
+            self._moving = False
+            if self._queue and self._queue[0][0] == "push":
+                return self._felt(xy, belief)
+            self.bumps += 1
+            self._lane_bumps += 1
+            if self._lane_bumps > self.params.lane_bumps:
+                self._next_lane()
+            back = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
+            return -back * self.params.back_off
+        return self._follow(xy)
+
+    def _felt(self, xy, belief) -> np.ndarray | None:
+        """A push sensed contact: stop if the target is known, else probe it if the belief
+        places it (and rounds are left), else touch it again beside the first touch (the
+        next of ``retouch_offsets``) or withdraw; first back off."""
+        if self._believe(belief) >= self.params.stop_confidence:
+            return None
+        back = np.array([-self.params.back_off, 0.0])
+        if self.pose is not None and self.rounds < self.params.max_rounds:
+            self._probe = FaceProbePolicy(self.shape, self.footprint, self.max_step,
+                                          self.params.probe, self.in_workspace)  # fmt: skip
+        elif self._retouches < len(self.params.retouch_offsets):
+            offset = np.array([0.0, self.params.retouch_offsets[self._retouches]])
+            self._retouches += 1
+            far = np.array([self._queue[0][1][0], xy[1]]) + offset
+            self._queue = [("move", xy + back + offset), ("push", far)]
+            self._withdraw(xy + offset, keep=True)
+        else:
+            self._withdraw(xy)
+        return back
+
+    def _withdraw(self, xy, keep: bool = False) -> None:
+        """Back along -x to the lanes' x at ``xy``'s y, after the queue's waypoints when
+        ``keep``, instead of them otherwise; then the next lane."""
+        home = ("move", np.array([self.lanes[self._lane, 0, 0], xy[1]]))
+        self._queue = [*self._queue, home] if keep else [home]
+
+    def _next_lane(self) -> None:
+        self._lane, self._lane_bumps, self._retouches = self._lane + 1, 0, 0
+        if self._lane < len(self.lanes):
+            start, far, back = self.lanes[self._lane]
+            self._queue = [("move", start), ("push", far), ("move", back)]
+        else:
+            self._queue = []
+
+    def _follow(self, xy) -> np.ndarray | None:
+        """The step towards the next waypoint (the next lane's once the queue is done), or
+        None once the lanes are done. A waypoint the gripper stopped moving towards without
+        sensing contact (held by something it does not feel) is given up: a push's lane is
+        withdrawn from."""
+        moved = np.inf if self._last_xy is None else np.linalg.norm(xy - self._last_xy)
+        if self._moving and self._queue and moved < 0.2 * np.linalg.norm(self._last_step):
+            if self._queue[0][0] == "push":
+                self._withdraw(xy)
+            else:
+                self._queue.pop(0)
+        for _ in range(3 * len(self.lanes) + 8):
+            if not self._queue:
+                if self._lane >= len(self.lanes):
+                    return None
+                self._next_lane()
+                continue
+            point = self._queue[0][1]
+            if np.linalg.norm(point - xy) < self.params.arrive_tolerance:
+                self._queue.pop(0)
+                continue
+            self._moving = True
+            # The rest of the leg in equal steps, as few as the clip allows (the sweep's).
+            leg = point - xy
+            return leg / np.ceil(float(np.max(np.abs(leg))) / self.max_step - 1e-9)
+        return None

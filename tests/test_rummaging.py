@@ -1,0 +1,170 @@
+"""The coverage sweep (core/coverage.py) and the belief rummaging policy (core/rummaging.py),
+played with a kinematic gripper against a box whose geometry is known: the sweep's lanes
+tile the band by construction, and the policy's steps, contacts and stops are checked against
+where the box really is."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from test_probing import BOX, FOOTPRINT, footprint_gap, guarded_move
+
+from stucco_drake.core.coverage import (
+    CoverageParams,
+    coverage_waypoints,
+    lane_centres,
+    waypoint_steps,
+)
+from stucco_drake.core.rummaging import BeliefRummagingPolicy, RummageParams
+
+MAX_STEP = 0.03
+START = np.array([0.0, 0.1])
+WIDTH = 0.1  # FOOTPRINT's extent along y (m)
+
+
+def test_lanes_tile_the_band_one_footprint_apart():
+    """The band -0.17..0.28 (0.45 m) in lanes at most 0.1 m apart: ceil(4.5) + 1 = 6 lanes,
+    0.09 m apart, both ends included; lane after lane from the end nearer the start."""
+    lanes = lane_centres(CoverageParams(), WIDTH)
+    assert lanes == pytest.approx(np.linspace(-0.17, 0.28, 6), abs=1e-12)
+    points = coverage_waypoints(START, CoverageParams(), WIDTH)
+    assert points[:, 1].reshape(-1, 3)[:, 0] == pytest.approx(lanes[::-1])  # 0.1 nearer 0.28
+    assert points[1::3, 0] == pytest.approx(np.full(6, 0.38))
+    assert points[0::3, 0] == pytest.approx(np.zeros(6))
+
+
+def test_nearest_first_sweeps_out_from_the_start():
+    """From y 0.1: the lane at 0.10, out to the nearer end (0.19, 0.28), then from the start
+    the other way (0.01, -0.08, -0.17)."""
+    points = coverage_waypoints(START, CoverageParams(nearest_first=True), WIDTH)
+    assert points[0::3, 1] == pytest.approx([0.10, 0.19, 0.28, 0.01, -0.08, -0.17])
+
+
+def test_lanes_stop_short_of_what_the_arm_cannot_reach():
+    """A workspace x <= 0.3 where y > 0.2: the lane at y = 0.28 is pushed to 0.30 (5 mm steps
+    back from 0.38), the others to 0.38."""
+    def inside(xy):
+        return xy[0] <= 0.3 + 1e-9 or xy[1] <= 0.2
+    points = coverage_waypoints(START, CoverageParams(), WIDTH, inside)
+    far = points[1::3]
+    assert far[0] == pytest.approx([0.30, 0.28]) and far[1:, 0] == pytest.approx(0.38)
+
+
+def test_steps_pass_through_every_waypoint_within_the_clip():
+    points = coverage_waypoints(START, CoverageParams(), WIDTH)
+    steps = waypoint_steps(START, points, MAX_STEP)
+    assert np.abs(steps).max() <= MAX_STEP + 1e-12
+    ends = START + np.cumsum(steps, axis=0)
+    for point in points:  # every waypoint is where some step ends (1e-12 m)
+        assert np.min(np.linalg.norm(ends - point, axis=1)) < 1e-12
+    # Per leg ceil(longest axis / 0.03) steps: to the first lane 0.18 m (6), each push and
+    # withdrawal 0.38 m (13 each), each of 5 lane changes 0.09 m (3).
+    assert len(steps) == 6 + 6 * 26 + 5 * 3
+
+
+class Belief:
+    """Pose hypotheses stand-in: the box's true pose, confident once the gripper has touched
+    the box ``needed`` times (counted by the test)."""
+
+    def __init__(self, pose, needed: int):
+        self.true, self.needed, self.touches, self.asked = pose, needed, 0, 0
+
+    def __call__(self):
+        self.asked += 1
+        confidence = 0.9999 if self.touches >= self.needed else 0.5
+        return dataclasses.make_dataclass("H", ["pose", "confidence"])(self.true, confidence)
+
+
+def play(policy, pose, belief, limit=400):
+    """Plays ``policy`` with the kinematic gripper against BOX at ``pose`` (None: nothing on
+    the table): (positions, steps, contacts)."""
+    xy, in_contact, positions, steps, contacts = START.copy(), False, [START.copy()], [], []
+    for _ in range(limit):
+        step = policy.next_step(xy, in_contact, belief)
+        if step is None:
+            break
+        if pose is None:
+            xy, in_contact = xy + step, False
+        else:
+            xy, in_contact = guarded_move(xy, step, pose)
+        if in_contact and isinstance(belief, Belief):
+            belief.touches += 1
+        positions.append(xy.copy())
+        steps.append(step)
+        contacts.append(in_contact)
+    return np.array(positions), np.array(steps), np.array(contacts)
+
+
+def test_with_nothing_felt_the_policy_plays_the_whole_sweep():
+    """Nothing on the table: every lane is pushed to its far end, in the sweep's own steps
+    (its lanes nearest the start first), and the belief is never asked."""
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                   RummageParams(max_actions=400))
+    belief = Belief(None, 1)
+    _positions, steps, _ = play(policy, None, belief)
+    lanes = coverage_waypoints(START, CoverageParams(nearest_first=True), WIDTH)
+    sweep = waypoint_steps(START, lanes, MAX_STEP)
+    assert len(steps) == len(sweep) and steps == pytest.approx(sweep, abs=1e-12)
+    assert belief.asked == 0
+
+
+def touches_are_guarded(positions, contacts, pose) -> bool:
+    """Every position where contact was sensed lies within one guarded-move increment (1/30 of
+    a step of at most 3 cm) outside the box: the gripper never pressed into it."""
+    gaps = [footprint_gap(p, pose) for p in positions[1:][contacts]]
+    return all(-1e-9 < gap <= 0.03 / 30 + 1e-9 for gap in gaps)
+
+
+def test_the_policy_backs_off_probes_and_stops_once_confident():
+    """A box 30 cm ahead, long side along x (x 0.221..0.379, y 0.14..0.20), caught by the
+    first lane's footprint (y 0.05..0.15): the push that touches it is backed off from by 2 cm
+    along -x; the hypotheses place it, a probe round touches it, and with that touch the
+    belief is confident and the policy stops, long before the sweep's 177 actions."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    belief = Belief(pose, needed=2)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START)
+    positions, steps, contacts = play(policy, pose, belief)
+    first = int(np.argmax(contacts))
+    assert positions[first + 1][1] == pytest.approx(0.10)
+    assert steps[first + 1] == pytest.approx([-RummageParams().back_off, 0.0])
+    assert policy.rounds == 1 and policy.touches >= 1 and belief.touches >= 2
+    # The first push reaches the box in 7 steps; a probe round takes at most 30.
+    assert policy.confidence == pytest.approx(0.9999) and len(steps) < 40
+    assert touches_are_guarded(positions, contacts, pose)
+
+
+def test_a_lane_through_the_believed_target_is_pushed_guarded():
+    """Never confident, one probe round: the policy explores on, and the next lane (y 0.19),
+    straight through the believed box, is pushed until it touches the box's near end and
+    backed off from, without pressing into it."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    params = RummageParams(max_rounds=1, max_actions=400)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    positions, _steps, contacts = play(policy, pose, Belief(pose, needed=99))
+    assert policy.rounds == 1
+    touched = positions[1:][contacts]
+    assert np.any(np.abs(touched[:, 1] - 0.19) < 1e-9)
+    assert touches_are_guarded(positions, contacts, pose)
+    for y in (0.01, -0.08, -0.17):  # the lanes beyond the box are pushed to their far end
+        assert positions[np.abs(positions[:, 1] - y) < 1e-9, 0].max() == pytest.approx(0.38)
+
+
+def test_a_felt_object_the_belief_does_not_place_is_touched_beside_then_left():
+    """No hypotheses (the belief says None): each push that touches the box is backed off
+    from and made again 3 cm to one side, then 3 cm to the other, then the lane is left. The
+    box spans y 0.14..0.20, the footprint 5 cm either side of its origin: lane 0.10 (the
+    first, nearest the start) touches at y 0.10 and 0.13, and its push at 0.07 passes the
+    box to the far end; lane 0.19 touches at 0.19, 0.22 and 0.16; lanes 0.28 and 0.01 pass
+    it."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                   RummageParams(max_actions=400))
+    positions, _steps, contacts = play(policy, pose, lambda: None)
+    assert policy.rounds == 0 and policy.contacts == int(contacts.sum())
+    touched_y = positions[1:][contacts][:, 1]
+    assert touched_y == pytest.approx([0.10, 0.13, 0.19, 0.22, 0.16], abs=1e-9)
+    beside = np.abs(positions[:, 1] - 0.07) < 1e-9
+    assert positions[beside, 0].max() == pytest.approx(0.38)
+    assert np.max(positions[:, 1]) == pytest.approx(0.28)
+    assert positions[-1, 0] == pytest.approx(0, abs=1e-12)
+    assert touches_are_guarded(positions, contacts, pose)
