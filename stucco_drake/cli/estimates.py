@@ -62,6 +62,23 @@ def _summary(rows: list[dict]) -> str:
         parts.append(f"mean {confident:.2f}")
         parts.append(f"{sum(grasped)}/{len(grasped)}")
         lines.append("   ".join(parts))
+    return "\n".join([*lines, "", _calibration(rows)])
+
+
+def _calibration(rows: list[dict]) -> str:
+    """Per base scene and in all: how many runs were confident (confidence at least
+    :data:`~stucco_drake.eval.sets.CONFIDENT_FROM`) and how many of them grasped; of the
+    others, in how many the target was touched at all."""
+    from stucco_drake.eval.sets import CONFIDENT_FROM
+
+    lines = [f"confident (>= {CONFIDENT_FROM}): runs, grasped   others: runs, target touched"]
+    for base in [*sorted({row["base"] for row in rows}), "all"]:
+        group = [row for row in rows if base in ("all", row["base"])]
+        sure = [row for row in group if row["confidence"] >= CONFIDENT_FROM]
+        rest = [row for row in group if row["confidence"] < CONFIDENT_FROM]
+        grasped = sum(bool(row["grasp_success"]) for row in sure)
+        touched = sum(int(row["target_contacts"]) > 0 for row in rest)
+        lines.append(f"{base:<4} {len(sure):>3} {grasped:>3}   {len(rest):>3} {touched:>3}")
     return "\n".join(lines)
 
 

@@ -36,7 +36,8 @@ class RummageParams:
         coverage: the lanes explored (the coverage sweep's, the nearest to the start first).
         probe: the probe rounds' settings (``max_actions``: of one round).
         stop_confidence: the target confidence at which the policy stops (the confidence from
-            which a run counts as confident, chosen on the development layouts).
+            which a run counts as confident, ``stucco_drake.eval.sets.CONFIDENT_FROM``, chosen
+            on the development layouts).
         back_off: step back along -x after a push that sensed contact.
         arrive_tolerance: distance at which a lane's waypoint counts as reached.
         max_actions: actions in all.
