@@ -53,6 +53,9 @@ def add_run_command(subparsers) -> None:
                           "'probe': after it, guarded touches of the target where the live "
                           "pose hypotheses put it; 'belief': rummaging chosen from the belief, "
                           "stopping once the target is known; 'sweep': a coverage raster")
+    run.add_argument("--target-estimator", choices=("rules", "hypotheses"), default="hypotheses",
+                     help="where the grasp is made: the grasp chosen across the weighted pose "
+                          "hypotheses (default), or Table II's segment-selection estimate")
     run.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
     run.add_argument("--record", metavar="OUT.html",
                      help="save a standalone Meshcat HTML recording of the run")
@@ -63,9 +66,9 @@ def add_run_command(subparsers) -> None:
     run.set_defaults(run=run_bor)  # fmt: skip
 
 
-def _grasp_hook(enabled: bool):
-    """The grasp hook when grasping is asked for and the grasp module is present, else None
-    (GS prints n/a)."""
+def _grasp_hook(enabled: bool, estimator: str = "hypotheses"):
+    """The grasp hook of ``estimator`` when grasping is asked for and the grasp module is
+    present, else None (GS prints n/a)."""
     if not enabled:
         return None
     try:
@@ -73,9 +76,9 @@ def _grasp_hook(enabled: bool):
     except ImportError:
         print("grasp: stucco_drake.bor.grasp is not available, GS is n/a", file=sys.stderr)
         return None
-    from stucco_drake.bor.episode import executor_grasp
+    from stucco_drake.bor.episode import GRASP_HOOKS
 
-    return executor_grasp
+    return GRASP_HOOKS[estimator]
 
 
 def run_bor(args: argparse.Namespace) -> int:
@@ -106,9 +109,10 @@ def run_bor(args: argparse.Namespace) -> int:
             bor = build_bor_diagram(scene, args.method, args.seed, meshcat=meshcat,
                                     tracker_params=params, dx_model=args.dx_model,
                                     policy=POLICY_SETTINGS[args.policy]())
+        grasp = _grasp_hook(not args.no_grasp, args.target_estimator)
         result = run_episode(scene, args.method, args.seed, args.actions, bor=bor,
-                             meshcat=meshcat, grasp=_grasp_hook(not args.no_grasp),
-                             dx_model=args.dx_model, tracker_params=params)
+                             meshcat=meshcat, grasp=grasp, dx_model=args.dx_model,
+                             tracker_params=params, target_estimator=args.target_estimator)
         print(result.summary(), flush=True)
     if record:
         save_recording(meshcat, record)
@@ -165,9 +169,9 @@ def plot_episode(result, path: str | Path) -> None:
         ax.scatter(mine[:, 0], mine[:, 1], color=color, marker="o", s=36, edgecolors="k",
                    linewidths=0.5, label=f"segment {label}" if label >= 0 else "unlabelled")
     if result.estimate is not None and result.target_shape is not None:
-        e = result.estimate
-        c, s = np.cos(e.yaw), np.sin(e.yaw)
-        X_WO = np.array([[c, -s, 0, e.x], [s, c, 0, e.y], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        x, y, yaw = np.asarray(result.estimate.pose, dtype=float)  # rules' or hypotheses'
+        c, s = np.cos(yaw), np.sin(yaw)
+        X_WO = np.array([[c, -s, 0, x], [s, c, 0, y], [0, 0, 1, 0], [0, 0, 0, 1.0]])
         xy = _outline(PosedSurface(result.target_shape, np.linalg.inv(X_WO)))
         ax.plot(xy[:, 0], xy[:, 1], "--", color=OUTLINE_COLOR.rgba[:3], lw=1.5,
                 label="estimated target")  # fmt: skip

@@ -40,6 +40,33 @@ def executor_grasp(bor: BorDiagram, simulator: Simulator, estimate):
     return grasp_estimate(bor.scene, simulator, estimate, points, bor.target_shape)
 
 
+def hypotheses_grasp(bor: BorDiagram, simulator: Simulator, hypotheses):
+    """The grasp hook at the target-pose ``hypotheses``' chosen pose (the grasp chosen across
+    them), the clutter to keep the fingers from being the points that pose does not explain,
+    placed by its motion scale between where they were sensed and where they are tracked (as
+    :func:`stucco_drake.bor.log.grasp_from_log` does). Without hypotheses: False."""
+    from stucco_drake.bor.grasp import grasp_at_pose
+
+    if hypotheses is None:
+        return False
+    context = simulator.get_context()
+    explained = hypotheses.explained[hypotheses.chosen]
+    tracked = bor.tracking.GetOutputPort("map_points").Eval(
+        bor.tracking.GetMyContextFromRoot(context))[:len(explained)]
+    state = bor.target_estimator.estimator_state(
+        bor.target_estimator.GetMyContextFromRoot(context))
+    sensed = state.sensed_points[:len(explained)]
+    chosen = hypotheses.chosen
+    scale = 1.0 if hypotheses.motion_scales is None else hypotheses.motion_scales[chosen]
+    placed = sensed + scale * (np.asarray(tracked) - sensed)
+    return grasp_at_pose(bor.scene, simulator, hypotheses.pose, placed[~explained],
+                         bor.target_shape)  # fmt: skip
+
+
+#: The grasp hooks of :func:`run_episode` by target-pose estimator.
+GRASP_HOOKS = {"rules": executor_grasp, "hypotheses": hypotheses_grasp}
+
+
 def action_stop_time(scene: SceneFile, k: int) -> float:
     """When (s) :func:`run_episode` stops to read action k's results."""
     return (k + 1) * scene.action_duration + _PIPELINE_STEPS * float(scene.plant.time_step)
@@ -177,6 +204,7 @@ def run_episode(
     on_action: Callable[[int, object], None] | None = None,
     dx_model: str = "ee",
     tracker_params=None,
+    target_estimator: str = "rules",
 ) -> EpisodeResult:
     """Plays the first ``n_actions`` actions of ``scene`` (all by default) through the BOR
     Diagram (``bor``, or one built for ``method`` and ``seed``), then scores the tracking.
@@ -189,7 +217,10 @@ def run_episode(
     ``grasp`` (see :data:`GraspHook`) after the last action's pose estimate. ``dx_model``
     (``"ee"``, the paper, ``"normal"`` or ``"cone"``) is how the tracker moves contact
     points and ``tracker_params`` the method's parameters (None: the scene's for STUCCO, the
-    paper's for the baselines), when the Diagram is built here.
+    paper's for the baselines), when the Diagram is built here. ``target_estimator`` says
+    which estimate is scored and given to ``grasp``: ``"rules"``, the segment selection's
+    ``estimate``, or ``"hypotheses"``, the ``pose_hypotheses`` (grasp them with
+    :func:`hypotheses_grasp`; :data:`GRASP_HOOKS` pairs each with its hook).
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
     bor = bor or build_bor_diagram(scene, method, seed, tracker_params=tracker_params,
@@ -218,7 +249,9 @@ def run_episode(
 
     points = np.asarray(bor.diagram.GetOutputPort("map_points").Eval(context))
     labels = np.asarray(bor.diagram.GetOutputPort("segment_labels").Eval(context))
-    estimate = bor.diagram.GetOutputPort("estimate").Eval(context)
+    # The rules' TargetPoseEstimate or the PoseHypotheses: both give the chosen ``pose``.
+    estimate = bor.diagram.GetOutputPort(
+        "pose_hypotheses" if target_estimator == "hypotheses" else "estimate").Eval(context)
     names = np.array([t.name for _, t in truth], dtype=object).astype(str)
     errors = np.array([np.linalg.norm(p - t.point) for p, t in truth])
     built = bor.scene

@@ -286,10 +286,10 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
                        help="seed the trackers with the episode's seed + K x "
                             f"{STREAM_STRIDE} (default 0: the episode's seed); another K "
                             "replays the same episodes with other draws")
-    table.add_argument("--target-estimator", choices=TARGET_ESTIMATORS, default="rules",
-                       help="where the grasps are made: 'rules' (Table II's segment "
-                            "selection) or 'hypotheses' (the grasp chosen across weighted "
-                            "pose hypotheses)")
+    table.add_argument("--target-estimator", choices=TARGET_ESTIMATORS, default="hypotheses",
+                       help="where the grasps are made: 'hypotheses' (default: the grasp "
+                            "chosen across weighted pose hypotheses) or 'rules' (the segment "
+                            "selection of results/table_ii)")
     table.add_argument("--policy", choices=("prescribed", *policies), default="prescribed",
                        help="what chooses the actions: the scene's prescribed list (default)"
                             + (", or after it 'probe': guarded touches of the likeliest target"
