@@ -114,6 +114,11 @@ BAD_INPUTS = {
     "scheduler without dask": ("table --scenes SYN2 --scheduler tcp://127.0.0.1:1 --out {tmp}/t",
                                "--scheduler needs --executor dask"),
     "missing option": ("table --scenes SYN2", "required: --out"),
+    "run unknown policy": ("run --scene FB --policy wander", "invalid choice: 'wander'"),
+    "belief without a target": ("table --scenes SYN2 --policy belief --out {tmp}/t",
+                                "--policy belief: scene SYN2 has no target to grasp"),
+    "sweep without a target": ("table --scenes SYN2 --policy sweep --out {tmp}/t",
+                               "--policy sweep: scene SYN2 has no target to grasp"),
     "noise < 0": ("scenes noise --scenes FB --bubble-std -0.001 --out {tmp}/n",
                   "FB-noise: sensor_noise.bubble_point_std: must be >= 0, got -0.001"),
     # Input files.

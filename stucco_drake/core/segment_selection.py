@@ -6,6 +6,11 @@
 penetration that picks a restart of the chosen segment). Each step's docstring gives its
 reasons and the measurements behind them.
 
+These rules were chosen on Table II's own episodes (the seeds their docstrings cite): they fit
+those four layouts, and on randomized ones they do not carry over. They are kept to reproduce
+``results/table_ii`` (``--target-estimator rules``); the grasps default to the weighted pose
+hypotheses (:mod:`~stucco_drake.core.pose_hypotheses`), developed on the development layouts.
+
 Frames and units: contact points and end-effector configs in the world frame W (m); poses
 (x, y, yaw) of the target's shape frame O in W (m, m, rad). A candidate group is named by
 its members, the tuple of the segment labels whose points it holds (one, or two for a union).
