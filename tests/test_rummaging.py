@@ -75,9 +75,10 @@ class Belief:
         return dataclasses.make_dataclass("H", ["pose", "confidence"])(self.true, confidence)
 
 
-def play(policy, pose, belief, limit=400):
+def play(policy, pose, belief, limit=400, contact_y=None):
     """Plays ``policy`` with the kinematic gripper against BOX at ``pose`` (None: nothing on
-    the table): (positions, steps, contacts)."""
+    the table): (positions, steps, contacts). With ``contact_y`` (the gripper's y -> the
+    contact's y), each touch's contact point is given to the policy."""
     xy, in_contact, positions, steps, contacts = START.copy(), False, [START.copy()], [], []
     for _ in range(limit):
         step = policy.next_step(xy, in_contact, belief)
@@ -89,6 +90,8 @@ def play(policy, pose, belief, limit=400):
             xy, in_contact = guarded_move(xy, step, pose)
         if in_contact and isinstance(belief, Belief):
             belief.touches += 1
+        if in_contact and contact_y is not None:
+            policy.sensed([[xy[0] + 0.04, contact_y(xy[1]), 0.1]])
         positions.append(xy.copy())
         steps.append(step)
         contacts.append(in_contact)
@@ -168,3 +171,20 @@ def test_a_felt_object_the_belief_does_not_place_is_touched_beside_then_left():
     assert np.max(positions[:, 1]) == pytest.approx(0.28)
     assert positions[-1, 0] == pytest.approx(0, abs=1e-12)
     assert touches_are_guarded(positions, contacts, pose)
+
+
+def test_a_touch_on_one_side_of_the_gripper_is_followed_that_way():
+    """The lane at y 0.10 meets the box (y 0.14..0.20) with the footprint's +y edge: the
+    contact, at the middle of the overlap (y 0.145), lies 4.5 cm to +y of the gripper's centre
+    line, so both touches beside go that way, 3 and 6 cm (y 0.13 and 0.16), and both touch the
+    box; told nothing of the side, the second would go to y 0.07 and miss it."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+
+    def overlap_middle(y):
+        return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
+
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                   RummageParams(max_actions=400))
+    positions, _steps, contacts = play(policy, pose, lambda: None, contact_y=overlap_middle)
+    touched_y = positions[1:][contacts][:, 1]
+    assert touched_y[:3] == pytest.approx([0.10, 0.13, 0.16], abs=1e-9)

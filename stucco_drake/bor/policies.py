@@ -42,7 +42,8 @@ def footprint(built: BuiltScene, penetration: RobotPenetration) -> np.ndarray:
 def add_policy(builder: DiagramBuilder, sub, built: BuiltScene, chain, settings: PolicySettings,
                penetration: RobotPenetration, target_shape) -> RummagingPolicy:  # fmt: skip
     """The policy of ``settings`` in the Diagram, fed by the scene's body poses (``sub``'s
-    ``body_poses``), the detector's verdict and the pose hypotheses (``chain``'s); its step
+    ``body_poses``), the detector's verdict, the pose hypotheses and the formed contacts
+    (``chain``'s); its step
     drives ``sub``'s ``planar_step``, and the Diagram exports its ``policy_done``."""
     scene = built.scene
     max_step = float(scene.control.max_step)
@@ -64,6 +65,8 @@ def add_policy(builder: DiagramBuilder, sub, built: BuiltScene, chain, settings:
                     policy.GetInputPort("current_action"))
     builder.Connect(chain.target_estimator.GetOutputPort("pose_hypotheses"),
                     policy.GetInputPort("pose_hypotheses"))
+    builder.Connect(chain.assembler.GetOutputPort("action_contacts"),
+                    policy.GetInputPort("action_contacts"))
     builder.Connect(policy.GetOutputPort("planar_step"), sub.GetInputPort("planar_step"))
     builder.ExportOutput(policy.GetOutputPort("policy_done"), "policy_done")
     return policy

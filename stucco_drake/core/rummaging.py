@@ -43,9 +43,13 @@ class RummageParams:
         max_actions: actions in all.
         max_rounds: probe rounds in all.
         lane_bumps: contacts while moving to or from a lane's push before the lane is left.
-        retouch_offsets: where (m, along y from the last touch) a felt object the belief does
-            not place yet is pushed again, one after another, before the lane is left: a
-            single touch leaves too few points for any pose.
+        retouches: how many times a felt object the belief does not place yet is pushed
+            again before the lane is left (a single touch leaves too few points for any
+            pose), each ``retouch_step`` further along y from the first touch, towards the
+            side of the gripper the contact was sensed on (more than ``side_margin`` from its
+            centre line), else to one side, then the other.
+        retouch_step: see ``retouches``.
+        side_margin: see ``retouches``.
     """
 
     coverage: CoverageParams = dataclasses.field(
@@ -57,7 +61,9 @@ class RummageParams:
     max_actions: int = 120
     max_rounds: int = 3
     lane_bumps: int = 2
-    retouch_offsets: tuple[float, ...] = (0.03, -0.06)
+    retouches: int = 2
+    retouch_step: float = 0.03
+    side_margin: float = 0.01
 
 
 def _belief_of(belief) -> tuple[np.ndarray | None, float]:
@@ -100,6 +106,7 @@ class BeliefRummagingPolicy:
         self.actions = self.rounds = self.touches = self.contacts = self.bumps = 0
         self.confidence, self.pose = 0.0, None
         self._lane, self._lane_bumps, self._retouches = -1, 0, 0
+        self._touch_y, self._contact_xy = 0.0, None
         # The waypoints ahead: (kind, point), kind "push" (a contact there is felt) or "move".
         self._queue: list[tuple[str, np.ndarray]] = []
         self._stopped = False
@@ -128,6 +135,14 @@ class BeliefRummagingPolicy:
         self.actions += 1
         self._last_step = np.clip(step, -self.max_step, self.max_step)
         return self._last_step
+
+    def sensed(self, points) -> None:
+        """The contact points (m, W) of the latest action whose contacts are known (they come
+        an action late: an action's contacts are formed after the next one is decided); an
+        empty set keeps the last non-empty one's."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if len(points):
+            self._contact_xy = points[:, :2].mean(axis=0)
 
     def _believe(self, belief) -> float:
         self.pose, self.confidence = _belief_of(belief)
@@ -160,29 +175,41 @@ class BeliefRummagingPolicy:
 
     def _felt(self, xy, belief) -> np.ndarray | None:
         """A push sensed contact: stop if the target is known, else probe it if the belief
-        places it (and rounds are left), else touch it again beside the first touch (the
-        next of ``retouch_offsets``) or withdraw; first back off."""
+        places it (and rounds are left), else touch it again beside the first touch (see
+        ``retouches``) or withdraw; first back off."""
         if self._believe(belief) >= self.params.stop_confidence:
             return None
         back = np.array([-self.params.back_off, 0.0])
         if self.pose is not None and self.rounds < self.params.max_rounds:
             self._probe = FaceProbePolicy(self.shape, self.footprint, self.max_step,
                                           self.params.probe, self.in_workspace)  # fmt: skip
-        elif self._retouches < len(self.params.retouch_offsets):
-            offset = np.array([0.0, self.params.retouch_offsets[self._retouches]])
-            self._retouches += 1
-            far = np.array([self._queue[0][1][0], xy[1]]) + offset
-            self._queue = [("move", xy + back + offset), ("push", far)]
-            self._withdraw(xy + offset, keep=True)
+        elif self._retouches < self.params.retouches:
+            if self._retouches == 0:
+                self._touch_y = float(xy[1])
+            # Which way is decided after the back-off, once this touch's contacts are known.
+            self._queue = [("retouch", np.array([self._queue[0][1][0], self._touch_y]))]
         else:
             self._withdraw(xy)
         return back
 
-    def _withdraw(self, xy, keep: bool = False) -> None:
-        """Back along -x to the lanes' x at ``xy``'s y, after the queue's waypoints when
-        ``keep``, instead of them otherwise; then the next lane."""
-        home = ("move", np.array([self.lanes[self._lane, 0, 0], xy[1]]))
-        self._queue = [*self._queue, home] if keep else [home]
+    def _retouch(self, xy, far_touch) -> list[tuple[str, np.ndarray]]:
+        """The waypoints of the next touch beside the first (at y ``far_touch[1]``, pushed to
+        x ``far_touch[0]``): sideways from where the gripper backed off to, the push, and
+        back to the lanes' x."""
+        p = self.params
+        k, self._retouches = self._retouches, self._retouches + 1
+        side = 0.0 if self._contact_xy is None else self._contact_xy[1] - far_touch[1]
+        if abs(side) > p.side_margin:
+            offset = np.sign(side) * (k + 1) * p.retouch_step
+        else:  # centred: one side, then the other
+            offset = (1.0 if k % 2 == 0 else -1.0) * (k // 2 + 1) * p.retouch_step
+        y = far_touch[1] + offset
+        return [("move", np.array([xy[0], y])), ("push", np.array([far_touch[0], y])),
+                ("move", np.array([self.lanes[self._lane, 0, 0], y]))]
+
+    def _withdraw(self, xy) -> None:
+        """Back along -x to the lanes' x at ``xy``'s y; then the next lane."""
+        self._queue = [("move", np.array([self.lanes[self._lane, 0, 0], xy[1]]))]
 
     def _next_lane(self) -> None:
         self._lane, self._lane_bumps, self._retouches = self._lane + 1, 0, 0
@@ -209,7 +236,10 @@ class BeliefRummagingPolicy:
                     return None
                 self._next_lane()
                 continue
-            point = self._queue[0][1]
+            kind, point = self._queue[0]
+            if kind == "retouch":
+                self._queue[:1] = self._retouch(xy, point)
+                continue
             if np.linalg.norm(point - xy) < self.params.arrive_tolerance:
                 self._queue.pop(0)
                 continue

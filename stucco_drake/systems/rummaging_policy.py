@@ -18,6 +18,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from stucco_drake.core.detection import ActionContact
+from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.probing import FaceProbePolicy
 from stucco_drake.core.rummaging import BeliefRummagingPolicy
 
@@ -56,6 +57,9 @@ class RummagingPolicy(LeafSystem):
             action's start: of the action that just ended).
         pose_hypotheses: the target-pose estimator's hypotheses (None: none yet); evaluated
             only when the policy asks (they are costly).
+        action_contacts: the latest formed :class:`ActionContacts` (the assembler's; an
+            action's are formed after the next is decided), given to a policy that has
+            ``sensed(points)`` before each decision; optional.
 
     Output ports:
         planar_step: (dx, dy) of the action under way (m, world); zeros once stopped.
@@ -82,6 +86,8 @@ class RummagingPolicy(LeafSystem):
             "current_action", AbstractValue.Make(ActionContact()))
         self._hypotheses = self.DeclareAbstractInputPort(
             "pose_hypotheses", AbstractValue.Make(None))
+        self._contacts = self.DeclareAbstractInputPort(
+            "action_contacts", AbstractValue.Make(ActionContacts()))
         self._state = self.DeclareAbstractState(
             AbstractValue.Make(PolicyState(policy.copy())))
         self.DeclareVectorOutputPort("planar_step", 2, self.calc_planar_step)
@@ -111,6 +117,8 @@ class RummagingPolicy(LeafSystem):
         policy = state.policy.copy()
         X_WG = self._poses.Eval(context)[self._body] @ self._X_BG
         verdict = self._verdict.Eval(context)
+        if hasattr(policy, "sensed") and self._contacts.HasValue(context):
+            policy.sensed(self._contacts.Eval(context).points)
         step = policy.next_step(X_WG.translation()[:2], bool(verdict.in_contact),
                                 lambda: self._hypotheses.Eval(context))
         return PolicyState(policy, k, None if step is None else np.asarray(step, dtype=float))
