@@ -99,3 +99,24 @@ def test_belief_rummaging_touches_the_box_beside_until_the_belief_places_it(rumm
     assert len(pushes) >= 3 and all("target" in truth[k - 1] for k in pushes[:3])
     assert policy.contacts >= 3 and policy.confidence > 0
     assert result.n_actions == policy.actions == ONE_LANE.max_actions
+
+
+def test_the_coverage_sweep_of_fb_tiles_the_band_within_reach():
+    """FB's sweep: lanes one gripper footprint apart (the scene file gives the footprint at
+    the gripper's height as about 8 by 9 cm, 9 along y), every waypoint one the arm can reach,
+    every action within the controller's clip, each lane pushed 38 cm deep unless the reach
+    stops it."""
+    from stucco_drake.bor.policies import coverage_scene
+    from stucco_drake.scenes import load_scene
+
+    scene = load_scene("FB")
+    swept = coverage_scene(scene)
+    actions = np.asarray(swept.actions)
+    assert np.abs(actions).max() <= 1.0 + 1e-12
+    path = np.asarray(scene.gripper_start.xy) + np.cumsum(actions * scene.control.max_step, 0)
+    assert all(scene.in_workspace(xy) for xy in path)
+    lanes = np.unique(np.round(path[path[:, 0] > 0.2, 1], 6))
+    assert len(lanes) >= 5
+    assert np.diff(lanes) == pytest.approx(np.full(len(lanes) - 1, 0.09), abs=0.01)
+    deepest = [path[np.abs(path[:, 1] - y) < 1e-6, 0].max() for y in lanes]
+    assert max(deepest) == pytest.approx(scene.gripper_start.xy[0] + 0.38, abs=1e-9)
