@@ -125,3 +125,18 @@ def test_outline_error_is_zero_for_symmetric_turns_and_the_shift_otherwise():
     # A quarter turn of a 16 x 8 cm box moves its far corners by (8 - 4) cm along each axis.
     quarter = pose + np.array([0.0, 0.0, np.pi / 2])
     assert outline_error(BOX, pose, quarter) == pytest.approx(0.04, abs=0.0025)
+
+
+def test_unexplained_points_are_the_clutter_placed_at_the_chosen_motion_scale():
+    """The points the chosen hypothesis leaves off the target, each at that hypothesis's
+    motion scale between sensed and tracked: here halfway, so (0, 0) -> (0.2, 0) gives 0.1."""
+    from stucco_drake.core.pose_hypotheses import PoseHypotheses
+
+    found = PoseHypotheses(
+        poses=np.zeros((2, 3)), costs=np.zeros(2), weights=np.full(2, 0.5),
+        explained=np.array([[True, False, True], [False, False, False]]), confidence=0.5,
+        chosen=0, pose=np.zeros(3), motion_scales=np.array([0.5, 1.0]))  # fmt: skip
+    sensed = np.array([[0.0, 0.0, 0.05], [0.0, 0.0, 0.05], [1.0, 1.0, 0.05]])
+    tracked = sensed + np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    clutter = found.unexplained_points(sensed, tracked)
+    np.testing.assert_allclose(clutter, [[0.1, 0.0, 0.05]], atol=1e-12)

@@ -50,17 +50,12 @@ def hypotheses_grasp(bor: BorDiagram, simulator: Simulator, hypotheses):
     if hypotheses is None:
         return False
     context = simulator.get_context()
-    explained = hypotheses.explained[hypotheses.chosen]
     tracked = bor.tracking.GetOutputPort("map_points").Eval(
-        bor.tracking.GetMyContextFromRoot(context))[:len(explained)]
+        bor.tracking.GetMyContextFromRoot(context))
     state = bor.target_estimator.estimator_state(
         bor.target_estimator.GetMyContextFromRoot(context))
-    sensed = state.sensed_points[:len(explained)]
-    chosen = hypotheses.chosen
-    scale = 1.0 if hypotheses.motion_scales is None else hypotheses.motion_scales[chosen]
-    placed = sensed + scale * (np.asarray(tracked) - sensed)
-    return grasp_at_pose(bor.scene, simulator, hypotheses.pose, placed[~explained],
-                         bor.target_shape)  # fmt: skip
+    clutter = hypotheses.unexplained_points(state.sensed_points, tracked)
+    return grasp_at_pose(bor.scene, simulator, hypotheses.pose, clutter, bor.target_shape)
 
 
 #: The grasp hooks of :func:`run_episode` by target-pose estimator.

@@ -296,10 +296,7 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
         found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log))
         if found is None:
             return None
-        # The clutter where the chosen hypothesis has the points: between sensed and tracked.
-        scale = 1.0 if found.motion_scales is None else found.motion_scales[found.chosen]
-        placed = log.contact_points + scale * (points - log.contact_points)
-        pose, clutter = found.pose, placed[~found.explained[found.chosen]]
+        pose, clutter = found.pose, found.unexplained_points(log.contact_points, points)
     else:
         raise ValueError(f"estimator: expected 'rules' or 'hypotheses', got {estimator!r}")
     simulator = Simulator(built.diagram)

@@ -99,6 +99,18 @@ class PoseHypotheses:
     pose: np.ndarray
     motion_scales: np.ndarray | None = None
 
+    def unexplained_points(self, sensed, tracked) -> np.ndarray:
+        """(m, 3) the contact points the chosen hypothesis does not put on the target (the
+        clutter a grasp keeps clear of), in W (m): each placed at that hypothesis's motion
+        scale between where it was ``sensed`` and where it is ``tracked`` ((n, 3) each, the
+        first n the hypotheses were made from)."""
+        n = self.explained.shape[1]
+        sensed = np.asarray(sensed, dtype=np.float64)[:n]
+        tracked = np.asarray(tracked, dtype=np.float64)[:n]
+        scale = 1.0 if self.motion_scales is None else self.motion_scales[self.chosen]
+        placed = sensed + scale * (tracked - sensed)
+        return placed[~self.explained[self.chosen]]
+
 
 def point_spread(particle_points, log_weights) -> np.ndarray:
     """(n,) each contact point's weighted RMS distance (m) from its mean over the particles
