@@ -31,6 +31,10 @@ def add_estimates_command(subparsers) -> None:
         "estimates", help="score both target-pose estimators on a table folder's logs")
     command.add_argument("--table", required=True, help="a `stucco-drake table` output folder")
     command.add_argument("--method", default="stucco", choices=TRACKER_NAMES)
+    command.add_argument("--motion-scales", nargs="+", type=float, default=None, metavar="S",
+                         help="the motion scales the hypotheses search, each in [0, 1] (default: "
+                              "the estimator's; 0: the points where sensed, 1: where tracked); "
+                              "other scales write estimates_<method>_scales_<S>...csv")
     command.set_defaults(run=run_estimates)
 
 
@@ -82,6 +86,19 @@ def _calibration(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _motion_scales(given) -> tuple[tuple[float, ...], str]:
+    """The motion scales to search and the output name's suffix for them ("" for the
+    estimator's own); InputError for a scale outside [0, 1]."""
+    from stucco_drake.core.motion_scale import MOTION_SCALES
+
+    if given is None:
+        return tuple(MOTION_SCALES), ""
+    bad = [s for s in given if not 0.0 <= s <= 1.0]
+    if bad:
+        raise InputError(f"--motion-scales: each must be in [0, 1], got {bad[0]:g}")
+    return tuple(given), "_scales_" + "_".join(f"{s:g}" for s in given)
+
+
 def run_estimates(args: argparse.Namespace) -> int:
     """Handler of ``stucco-drake estimates``."""
     from stucco_drake.bor import log as bor_log
@@ -91,6 +108,7 @@ def run_estimates(args: argparse.Namespace) -> int:
     from stucco_drake.eval.target_estimates import score_estimates
 
     out = Path(args.table)
+    scales, suffix = _motion_scales(args.motion_scales)
     dx_model, params, stream = _table_settings(out)
     paths = sorted((out / "logs").glob("*.npz"))
     if not paths:
@@ -105,7 +123,7 @@ def run_estimates(args: argparse.Namespace) -> int:
         scored = []
 
         def score(log, tracker, penetration=penetration, scored=scored):
-            scored.append(score_estimates(log, tracker, penetration))
+            scored.append(score_estimates(log, tracker, penetration, scales=scales))
 
         replay(log, args.method, log.seed + 1000 * stream,
                params if args.method == "stucco" else None, penetration=penetration,
@@ -115,7 +133,7 @@ def run_estimates(args: argparse.Namespace) -> int:
         rows.append(row)
         print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) and not math.isnan(v)
                        else f"{k}={v}" for k, v in row.items()), flush=True)  # fmt: skip
-    target = out / f"estimates_{args.method}.csv"
+    target = out / f"estimates_{args.method}{suffix}.csv"
     with target.open("w", newline="", encoding="utf-8") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
         writer.writeheader()

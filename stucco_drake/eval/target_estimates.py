@@ -14,7 +14,7 @@ import numpy as np
 
 from stucco_drake.core.grasp_choice import grasp_at, grasp_closes
 from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline, transform
-from stucco_drake.core.motion_scale import motion_scaled_hypotheses
+from stucco_drake.core.motion_scale import MOTION_SCALES, motion_scaled_hypotheses
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_hypotheses import (
     FreeSpace,
@@ -61,9 +61,10 @@ def rules_estimate(rng, log: EpisodeLog, tracker, shape,
 
 
 def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: RobotPenetration,
-                        params: HypothesisParams | None = None) -> PoseHypotheses | None:
-    """Weighted hypotheses over poses and motion scales from the contacts where sensed and
-    where the tracker's MAP particle has them
+                        params: HypothesisParams | None = None,
+                        scales=MOTION_SCALES) -> PoseHypotheses | None:  # fmt: skip
+    """Weighted hypotheses over poses and motion ``scales`` from the contacts where sensed
+    and where the tracker's MAP particle has them
     (:func:`~stucco_drake.core.motion_scale.motion_scaled_hypotheses`), with the free space of
     every logged config (swept along the actions that sensed no contact), or None when no
     segment has enough points."""
@@ -74,7 +75,7 @@ def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: Robot
     free = FreeSpace(penetration, log.ee_position, log.ee_rotation[-1], point_steps(log),
                      free_actions=np.diff(log.contact_offsets) == 0)
     return motion_scaled_hypotheses(rng, log.contact_points, points, labels, shape,
-                                    free_space=free, params=params)  # fmt: skip
+                                    free_space=free, params=params, scales=scales)  # fmt: skip
 
 
 def target_surface_distance(shape, points, pose) -> np.ndarray:
@@ -95,11 +96,11 @@ def outline_error(shape, estimate, truth, spacing: float = 0.005) -> float:
 
 
 def score_estimates(log: EpisodeLog, tracker, penetration: RobotPenetration,
-                    params: HypothesisParams | None = None) -> dict:  # fmt: skip
+                    params: HypothesisParams | None = None, scales=MOTION_SCALES) -> dict:
     """Both estimators on one replayed log against the target's final pose: a row with the
     target's contact count, each estimate's position and outline errors (m; NaN when it gave
-    none) and the hypotheses' confidence and count. Generators seeded by ``[log.seed, 1]``
-    as the grasp's."""
+    none) and the hypotheses' (searched at the motion ``scales``) confidence and count.
+    Generators seeded by ``[log.seed, 1]`` as the grasp's."""
     shape = log_target_shape(log)
     truth = log.object_poses[-1, 0][[0, 1, -1]]
     on_target = log.contact_object == 0
@@ -112,7 +113,7 @@ def score_estimates(log: EpisodeLog, tracker, penetration: RobotPenetration,
     row["target_points_within_5mm"] = float(np.mean(offsets < 0.005)) if len(offsets) else np.nan
     rules = rules_estimate(np.random.default_rng([log.seed, 1]), log, tracker, shape, penetration)
     found = hypotheses_estimate(np.random.default_rng([log.seed, 1]), log, tracker, shape,
-                                penetration, params)  # fmt: skip
+                                penetration, params, scales)  # fmt: skip
     closing_yaw = float(np.arctan2(log.ee_rotation[-1][1, 0], log.ee_rotation[-1][0, 0]))
     for name, pose in (("rules", None if rules is None else rules.pose),
                        ("hypotheses", None if found is None else found.pose)):  # fmt: skip
