@@ -120,7 +120,7 @@ BAD_INPUTS = {
     "sweep without a target": ("table --scenes SYN2 --policy sweep --out {tmp}/t",
                                "--policy sweep: scene SYN2 has no target to grasp"),
     "estimates scale > 1": ("estimates --table {tmp}/a_folder --motion-scales 0 1.5",
-                            "--motion-scales: each must be in [0, 1], got 1.5"),
+                            "--motion-scales: ", "in [0, 1], got [0.0, 1.5]"),
     "noise < 0": ("scenes noise --scenes FB --bubble-std -0.001 --out {tmp}/n",
                   "FB-noise: sensor_noise.bubble_point_std: must be >= 0, got -0.001"),
     # Input files.

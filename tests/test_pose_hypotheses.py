@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 
 from stucco_drake.core.icp import rotations
-from stucco_drake.core.pose_hypotheses import FreeSpace, point_spread, pose_hypotheses
+from stucco_drake.core.pose_hypotheses import (
+    FreeSpace,
+    PoseHypotheses,
+    point_spread,
+    pose_hypotheses,
+)
 from stucco_drake.core.shapes import BoxSdf
 
 BOX = BoxSdf((0.08, 0.04, 0.05))
@@ -130,8 +135,6 @@ def test_outline_error_is_zero_for_symmetric_turns_and_the_shift_otherwise():
 def test_unexplained_points_are_the_clutter_placed_at_the_chosen_motion_scale():
     """The points the chosen hypothesis leaves off the target, each at that hypothesis's
     motion scale between sensed and tracked: here halfway, so (0, 0) -> (0.2, 0) gives 0.1."""
-    from stucco_drake.core.pose_hypotheses import PoseHypotheses
-
     found = PoseHypotheses(
         poses=np.zeros((2, 3)), costs=np.zeros(2), weights=np.full(2, 0.5),
         explained=np.array([[True, False, True], [False, False, False]]), confidence=0.5,

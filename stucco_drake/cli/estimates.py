@@ -89,13 +89,14 @@ def _calibration(rows: list[dict]) -> str:
 def _motion_scales(given) -> tuple[tuple[float, ...], str]:
     """The motion scales to search and the output name's suffix for them ("" for the
     estimator's own); InputError for a scale outside [0, 1]."""
-    from stucco_drake.core.motion_scale import MOTION_SCALES
+    from stucco_drake.core.motion_scale import MOTION_SCALES, checked_scales
 
     if given is None:
         return tuple(MOTION_SCALES), ""
-    bad = [s for s in given if not 0.0 <= s <= 1.0]
-    if bad:
-        raise InputError(f"--motion-scales: each must be in [0, 1], got {bad[0]:g}")
+    try:
+        checked_scales(given)
+    except ValueError as error:
+        raise InputError(f"--motion-scales: {error}") from None
     return tuple(given), "_scales_" + "_".join(f"{s:g}" for s in given)
 
 

@@ -33,6 +33,14 @@ from stucco_drake.core.validation import as_finite_array
 MOTION_SCALES = (0.0, 0.25, 0.5, 0.75, 1.0)
 
 
+def checked_scales(scales) -> np.ndarray:
+    """``scales`` as a (k,) float array; ValueError unless at least one, each in [0, 1]."""
+    scales = np.asarray(scales, dtype=np.float64).reshape(-1)
+    if len(scales) == 0 or np.any((scales < 0.0) | (scales > 1.0)):
+        raise ValueError(f"scales: expected motion scales in [0, 1], got {scales.tolist()}")
+    return scales
+
+
 def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
                              shape: BoxSdf | CylinderSdf, *,
                              free_space: FreeSpace | None = None,
@@ -61,9 +69,7 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
     params = params or HypothesisParams()
     sensed = as_finite_array(sensed, "sensed", (None, 3))
     tracked = as_finite_array(tracked, "tracked", sensed.shape)
-    scales = np.asarray(scales, dtype=np.float64).reshape(-1)
-    if len(scales) == 0 or np.any((scales < 0.0) | (scales > 1.0)):
-        raise ValueError(f"scales: expected motion scales in [0, 1], got {scales.tolist()}")
+    scales = checked_scales(scales)
     found = []
     for scale in scales:
         points = sensed + scale * (tracked - sensed)
