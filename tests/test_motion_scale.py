@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from stucco_drake.core.icp import rotations
+from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.motion_scale import motion_scaled_hypotheses
 from stucco_drake.core.pose_hypotheses import pose_hypotheses
 from stucco_drake.core.shapes import BoxSdf
@@ -78,6 +79,30 @@ def test_a_pushed_box_is_found_where_the_tracker_followed_it():
     position, yaw = _error(found.pose)
     assert position < 0.004 and yaw < np.radians(2.0), (position, np.degrees(yaw))
     assert found.motion_scales[found.chosen] == 1.0
+
+
+def test_a_carry_that_fits_as_well_as_no_motion_costs_the_log_of_its_spread():
+    """Noise-free points on two faces, carried rigidly 3 cm along the long face: the sensed and
+    the carried points fit the outline exactly, so the only difference between the best
+    hypotheses at scales 0 and 1 is each explained point's Gaussian normaliser,
+    log(sqrt(noise^2 + (transport_noise * 3 cm)^2) / noise): 14 * 0.409 = 5.73 at the
+    defaults (4 mm, 0.15). ICP on a 2 mm outline leaves a fraction of a millimetre: 0.1 of
+    tolerance on the cost. The smaller motion is the one chosen."""
+    params = HypothesisParams()
+    sensed = np.column_stack([_two_faces() @ rotations(TRUE_POSE[2]).T + TRUE_POSE[:2],
+                              np.full(14, HEIGHT)])  # fmt: skip
+    carry = np.append(np.array([0.03, 0.0]) @ rotations(TRUE_POSE[2]).T, 0.0)
+    tracked = sensed + carry
+    labels = np.zeros(len(sensed), dtype=np.int64)
+    best = {scale: motion_scaled_hypotheses(np.random.default_rng(4), sensed, tracked, labels,
+                                            BOX, scales=(scale,)).costs[0]
+            for scale in (0.0, 1.0)}  # fmt: skip
+    spread = np.hypot(params.contact_noise, params.transport_noise * 0.03)
+    expected = len(sensed) * np.log(spread / params.contact_noise)
+    assert best[1.0] - best[0.0] == pytest.approx(expected, abs=0.1)
+    found = motion_scaled_hypotheses(np.random.default_rng(4), sensed, tracked, labels, BOX)
+    assert found.motion_scales[found.chosen] == 0.0
+    assert _error(found.pose)[0] < 0.002
 
 
 def test_bad_scales_or_shapes_are_one_line_errors():

@@ -13,6 +13,11 @@ class HypothesisParams:
 
     Attributes:
         contact_noise: standard deviation of a contact point about the touched surface.
+        transport_noise: standard deviation of a tracked point's motion per metre of it
+            (dimensionless): a point placed at a fraction ``alpha`` of the way from where it
+            was sensed to where it is tracked (:mod:`~stucco_drake.core.motion_scale`) is
+            uncertain by ``transport_noise * alpha * |tracked - sensed|`` (xy) beyond
+            ``contact_noise``, as odometry is by a share of the distance travelled.
         other_object_cost: cost (negative log-likelihood, dimensionless) of a point lying on
             another object; a point within ``contact_noise * sqrt(2 other_object_cost)`` of the
             posed target's surface is cheaper on it (2.0: two standard deviations).
@@ -37,6 +42,7 @@ class HypothesisParams:
     """
 
     contact_noise: float = 0.004
+    transport_noise: float = 0.15
     other_object_cost: float = 2.0
     free_space_tolerance: float = 0.002
     free_space_scale: float = 0.002

@@ -5,11 +5,14 @@ log-likelihood of three kinds of evidence, in the spirit of CHSEL (Zhong, Fazeli
 RSS 2023: contact points lie on the object's surface, free-space points outside it):
 
 - **Contact points.** Each tracked point either lies on the target's surface (cost
-  ``d^2 / 2 sigma_i^2``, ``d`` its signed distance to the posed target) or on some other object,
-  at a fixed cost ``other_object_cost`` plus the same quadratic for any depth inside the target
+  ``d^2 / 2 sigma_i^2 + log(sigma_i / contact_noise)``, a Gaussian's negative log-density up
+  to a constant, ``d`` its signed distance to the posed target) or on some other object, at a
+  fixed cost ``other_object_cost`` plus the same quadratic for any depth inside the target
   (another object's surface cannot lie inside it). A point takes the cheaper; the target
-  *explains* it when that is the surface. ``sigma_i`` adds the point's spread over the
-  tracker's particles to the sensor's noise, so points the filter is unsure of count less.
+  *explains* it when that is the surface. ``sigma_i`` adds the point's own uncertainty (its
+  spread over the tracker's particles, or how far it was carried: see
+  :mod:`~stucco_drake.core.motion_scale`) to the sensor's noise, so points the robot is
+  unsure of count less, and explaining one costs more the less sure it is.
 - **Free space.** Where the gripper was after the target was last touched, the target is not:
   the posed target's cross-section must not lie inside the robot (its own geometry, pxpen) at
   those configs: each action's end, and every few millimetres along each push that sensed
@@ -138,7 +141,7 @@ def contact_costs(poses, points, sigma, shape, params: HypothesisParams):
     local = np.einsum("bni,bij->bnj", points[None, :, :2] - poses[:, None, :2],
                       rotations(poses[:, 2]))  # fmt: skip
     d = cross_section_sdf(shape)(local)
-    on_surface = d**2 / (2.0 * sigma**2)
+    on_surface = d**2 / (2.0 * sigma**2) + np.log(sigma / params.contact_noise)
     elsewhere = params.other_object_cost + np.minimum(d, 0.0) ** 2 / (2.0 * sigma**2)
     explained = on_surface < elsewhere
     return np.minimum(on_surface, elsewhere).sum(axis=1), explained
