@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stucco_drake.core.icp import rotations
 from stucco_drake.core.hypothesis_params import HypothesisParams
+from stucco_drake.core.icp import rotations
 from stucco_drake.core.motion_scale import motion_scaled_hypotheses
 from stucco_drake.core.pose_hypotheses import pose_hypotheses
 from stucco_drake.core.shapes import BoxSdf
