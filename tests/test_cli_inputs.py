@@ -77,6 +77,7 @@ def paths(tmp_path):
     (tmp_path / "no_package.yaml").write_text(fb.replace("stucco_drake_models", "no_such_pkg"))
     (tmp_path / "typo.yaml").write_text("lenght: 0.02\n")
     (tmp_path / "broken.yaml").write_text("length: [0.02\n")
+    (tmp_path / "bad.yaml").write_text("probe:\n  max_bumps: 1.5\n")
     (tmp_path / "old_sweep").mkdir()
     (tmp_path / "old_sweep" / "sweep.csv").write_text("scene,seed,method,fmi\n")
     return tmp_path
@@ -135,6 +136,19 @@ BAD_INPUTS = {
                         "--stucco-params: ", "broken.yaml is not valid YAML"),
     "params unknown key": ("run --scene FB --stucco-params {tmp}/typo.yaml",
                            "typo.yaml: SoftTrackingParams: unknown key(s) lenght"),
+    "policy params unknown key": (
+        "table --scenes FB --policy probe --policy-params {tmp}/typo.yaml --out {tmp}/t",
+        "--policy-params {tmp}/typo.yaml: lenght: not a setting of ProbeParams"),
+    "policy params bad value": ("run --scene FB --policy belief --policy-params {tmp}/bad.yaml",
+                                "--policy-params {tmp}/bad.yaml: probe.max_bumps: expected an "
+                                "integer, got 1.5"),
+    "policy params missing": ("run --scene FB --policy probe --policy-params {tmp}/none.yaml",
+                              "--policy-params: no such file", "none.yaml"),
+    "policy params not yaml": ("run --scene FB --policy sweep --policy-params {tmp}/broken.yaml",
+                               "--policy-params: ", "broken.yaml is not valid YAML"),
+    "policy params, prescribed": ("table --scenes SYN2 --policy-params {tmp}/bad.yaml "
+                                  "--out {tmp}/t",
+                                  "--policy-params: --policy prescribed takes no settings"),
     "params a folder": ("run --scene FB --stucco-params {tmp}/a_folder",
                         "cannot read", "a_folder (Is a directory)"),
     # Output paths.
@@ -178,6 +192,32 @@ def test_a_table_folder_of_other_settings_or_versions_is_refused_before_any_work
     assert_one_line_error([*argv, "--dx-model", "normal"], capsys, "runs.csv: not a runs file")
 
 
+def test_policy_settings_reach_the_episodes_and_a_folder_keeps_its_own(
+    tmp_path, tripwire, capsys, monkeypatch
+):
+    import stucco_drake.eval.cli_table
+
+    seen = {}
+
+    def make_table(scenes, methods, runs, out, executor, **kwargs):
+        seen.update(kwargs)
+        raise WorkStarted("the command started its work")
+
+    monkeypatch.setattr(stucco_drake.eval.cli_table, "make_table", make_table)
+    (tmp_path / "probe.yaml").write_text("end_face_first: true\nclearance: 0.05\n")
+    argv = ["table", "--scenes", "FB", "--policy", "probe", "--out", str(tmp_path / "t")]
+    with pytest.raises(WorkStarted):
+        main([*argv, "--policy-params", str(tmp_path / "probe.yaml")])
+    # The episodes of FB are recorded under the file's settings, the rest at the defaults.
+    settings = seen["sources"]["FB"].produce.keywords["policy"]
+    assert settings.end_face_first is True and settings.clearance == 0.05
+    assert settings.max_bumps == 1
+    assert seen["policy_params"] == {"end_face_first": True, "clearance": 0.05}
+    # The folder recorded them: the defaults are another setting there.
+    assert_one_line_error(argv, capsys, "table_config.yaml", "--policy-params ",
+                          "end_face_first", "not {}")
+
+
 @pytest.mark.skipif(
     not hasattr(os, "geteuid") or os.geteuid() == 0,
     reason="needs a user whom a folder's permissions bind",
@@ -207,10 +247,13 @@ def test_a_read_only_folder_is_refused_before_any_work(tmp_path, tripwire, capsy
     "run --scene FB --plot {tmp}/new/fb.png --stucco-params {tmp}/good.yaml",
     "diagram --scene FB --out {tmp}/new/bor.svg",
     "table --scenes SYN2 --out {tmp}/new",
+    "table --scenes FB --policy probe --policy-params {tmp}/probe.yaml --out {tmp}/new",
+    "run --scene FB --policy belief --policy-params {tmp}/probe.yaml --plot {tmp}/new/fb.png",
     "sweep --method dbscan --scenes SYN2 --out {tmp}/new",
 ])  # fmt: skip
 def test_good_inputs_pass_the_checks(argv, tmp_path, tripwire):
     (tmp_path / "good.yaml").write_text("n_particles: 50\n")
+    (tmp_path / "probe.yaml").write_text("max_actions: 20\n")
     with pytest.raises(WorkStarted):
         main(argv.format(tmp=tmp_path).split())
     assert (tmp_path / "new").is_dir()  # the output's folder is made before the work

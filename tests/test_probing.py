@@ -165,3 +165,14 @@ def test_by_default_only_probes_reached_in_a_straight_line_are_made():
     # (the guarded move stops within one 1 mm increment; the approach is along y only)
     assert sorted(p[0] for p in touched_at) == pytest.approx([0.2 - 0.0395, 0.2 + 0.0395],
                                                              abs=1e-3)
+
+
+def test_end_face_first_touches_the_short_face_before_the_long_one():
+    pose = np.array([0.2, 0.0, np.radians(30)])
+    default = plan_probes(pose, BOX, gripper_xy=[0.0, 0.0], params=ProbeParams())
+    first = plan_probes(pose, BOX, gripper_xy=[0.0, 0.0],
+                        params=ProbeParams(end_face_first=True))  # fmt: skip
+    # The same three touches, the short face's (0.079 m from the centre) moved to the front.
+    assert np.linalg.norm(first[0].point - pose[:2]) == pytest.approx(0.079)
+    for a, b in zip([default[2], default[0], default[1]], first, strict=True):
+        assert np.array_equal(a.point, b.point) and np.array_equal(a.normal, b.normal)

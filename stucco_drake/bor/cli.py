@@ -17,6 +17,7 @@ import numpy as np
 from stucco_drake.core.inputs import (
     InputError,
     non_negative_int,
+    policy_settings_of,
     positive_int,
     prepare_output_file,
     read_stucco_params,
@@ -53,6 +54,9 @@ def add_run_command(subparsers) -> None:
                           "'probe': after it, guarded touches of the target where the live "
                           "pose hypotheses put it; 'belief': rummaging chosen from the belief, "
                           "stopping once the target is known; 'sweep': a coverage raster")
+    run.add_argument("--policy-params", metavar="SETTINGS.yaml", default=None,
+                     help="the policy's settings as YAML overrides of its defaults (nested "
+                          "mappings for nested settings)")
     run.add_argument("--target-estimator", choices=("rules", "hypotheses"), default="hypotheses",
                      help="where the grasp is made: the grasp chosen across the weighted pose "
                           "hypotheses (default), or Table II's segment-selection estimate")
@@ -94,6 +98,7 @@ def run_bor(args: argparse.Namespace) -> int:
     if args.stucco_params is not None and args.method != "stucco":
         raise InputError(f"--stucco-params is for --method stucco, not {args.method}")
     params = read_stucco_params(args.stucco_params)
+    settings, _ = policy_settings_of(args.policy, args.policy_params, POLICY_SETTINGS)
     # A folder runs each of its scenes.
     scenes = [load_scene(path) for path in scene_paths(args.scene)]
     if len(scenes) > 1 and (args.record or args.plot):
@@ -104,11 +109,11 @@ def run_bor(args: argparse.Namespace) -> int:
     for scene in scenes:
         bor = None
         if args.policy == "sweep":
-            scene = coverage_scene(scene)
+            scene = coverage_scene(scene, settings)
         elif args.policy != "prescribed":
             bor = build_bor_diagram(scene, args.method, args.seed, meshcat=meshcat,
                                     tracker_params=params, dx_model=args.dx_model,
-                                    policy=POLICY_SETTINGS[args.policy]())
+                                    policy=settings)
         grasp = _grasp_hook(not args.no_grasp, args.target_estimator)
         result = run_episode(scene, args.method, args.seed, args.actions, bor=bor,
                              meshcat=meshcat, grasp=grasp, dx_model=args.dx_model,

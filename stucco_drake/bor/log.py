@@ -341,16 +341,20 @@ POLICY_SETTINGS = {"probe": ProbeParams, "belief": RummageParams, "sweep": Cover
 
 
 def policy_source(source: EpisodeSource, name: str, stucco_params, dx_model: str,
-                  policy: str) -> EpisodeSource:  # fmt: skip
+                  policy: str, settings=None) -> EpisodeSource:  # fmt: skip
     """``source`` with its episodes recorded under the policy named ``policy`` (a key of
-    :data:`POLICY_SETTINGS`, at its defaults; :func:`record_episode`, the live tracker STUCCO
-    with ``stucco_params``, None: the scene's, under ``dx_model``); ValueError for a scene
-    with no target to grasp."""
+    :data:`POLICY_SETTINGS`) with ``settings`` (an instance of its settings class; None: the
+    defaults) (:func:`record_episode`, the live tracker STUCCO with ``stucco_params``, None:
+    the scene's, under ``dx_model``); ValueError for a scene with no target to grasp."""
     if source.grasp is None:
         raise ValueError(f"--policy {policy}: scene {name} has no target to grasp")
+    settings = POLICY_SETTINGS[policy]() if settings is None else settings
+    if not isinstance(settings, POLICY_SETTINGS[policy]):
+        raise ValueError(f"--policy {policy} takes {POLICY_SETTINGS[policy].__name__}, "
+                         f"not {type(settings).__name__}")
     return dataclasses.replace(source, produce=functools.partial(
         record_scene_file, source.scene_file or name, tracker_params=stucco_params,
-        dx_model=dx_model, policy=POLICY_SETTINGS[policy]()))
+        dx_model=dx_model, policy=settings))
 
 
 #: The closed-loop policies ``stucco-drake table --policy`` offers besides ``prescribed``.

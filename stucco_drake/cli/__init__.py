@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from stucco_drake.bor.cli import add_diagram_command, add_run_command
-from stucco_drake.bor.log import BOR_SOURCES, POLICIES, table_scenes
+from stucco_drake.bor.log import BOR_SOURCES, POLICIES, POLICY_SETTINGS, table_scenes
 from stucco_drake.cli.estimates import add_estimates_command
 from stucco_drake.cli.scenes import add_scenes_command
 from stucco_drake.cli.sweep import add_sweep_command
@@ -82,7 +82,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_sim_command(commands)
     add_scenes_command(commands)
     add_estimates_command(commands)
-    add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES}, table_scenes, POLICIES)
+    add_table_command(commands, {**BOR_SOURCES, **SYNTHETIC_SOURCES}, table_scenes, POLICIES,
+                      POLICY_SETTINGS)
     add_run_command(commands)
     add_diagram_command(commands)
     add_sweep_command(commands)

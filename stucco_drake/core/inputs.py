@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 
 
@@ -111,3 +112,47 @@ def read_stucco_params(path: str | os.PathLike | None):
         return SoftTrackingParams.from_yaml(Path(path))
     except ValueError as error:
         raise InputError(f"--stucco-params: {error}") from None
+
+
+def read_settings(option: str, path: str | os.PathLike | None, default):
+    """``default`` (a settings dataclass instance) with the overrides of the YAML file given to
+    ``option`` (None: ``default``; see :func:`~stucco_drake.core.settings.settings_with`);
+    InputError (one line naming the option, the file and the key) when it cannot be read or
+    holds a bad key or value."""
+    if path is None:
+        return default
+    import yaml
+
+    from stucco_drake.core.settings import settings_with
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{option}: no such file {path}") from None
+    except (OSError, UnicodeDecodeError) as error:
+        reason = getattr(error, "strerror", None) or "not UTF-8 text"
+        raise InputError(f"{option}: cannot read {path} ({reason})") from None
+    except yaml.YAMLError as error:
+        reason = " ".join(str(error).split())  # PyYAML's message spans several lines
+        raise InputError(f"{option}: {path} is not valid YAML ({reason})") from None
+    try:
+        return settings_with(default, data if data is not None else {}, f"{option} {path}: ")
+    except ValueError as error:
+        raise InputError(str(error)) from None
+
+
+def policy_settings_of(policy: str, path, settings_classes: Mapping):
+    """(settings, how they differ from the defaults) of the policy named ``policy``: its
+    settings class (``settings_classes[policy]``) with the overrides of the YAML file at
+    ``path`` (None: the defaults); (None, None) for ``prescribed``. InputError (one line) for
+    a bad file, or a file for a policy without settings."""
+    if policy == "prescribed" or policy not in settings_classes:
+        if path is not None:
+            raise InputError(f"--policy-params: --policy {policy} takes no settings")
+        return None, None
+    from stucco_drake.core.settings import settings_changes
+
+    default = settings_classes[policy]()
+    settings = read_settings("--policy-params", path, default)
+    return settings, settings_changes(settings, default)

@@ -11,7 +11,8 @@ where it was not believed to be, or clutter) is backed off from at once and the 
 again, so that the gripper does not drag what it bumped.
 
 Which faces: a box's long face nearest the gripper at two points (its yaw and one coordinate),
-then the nearer short face at its centre (the other coordinate); a cylinder from the two
+then the nearer short face at its centre (the other coordinate; or that first,
+``end_face_first``); a cylinder from the two
 directions 45 degrees either side of the gripper's. Probes whose stand-off point lies outside
 the workspace, or (by default) that the gripper cannot reach in a straight line clear of the
 hypothesised target, are skipped.
@@ -56,6 +57,10 @@ class ProbeParams:
             is touched.
         cylinder_angles: directions (rad) either side of the gripper's from which a cylinder
             is touched.
+        end_face_first: touch a box's nearer short face before its long face (default:
+            after). A box the script turned about the corner nearest the gripper keeps that
+            corner on the believed long face, where the long-face touches meet it; its short
+            face is where the turn shows (``results/development/README.md``, tenth look).
     """
 
     standoff: float = 0.02
@@ -70,6 +75,7 @@ class ProbeParams:
     direct_only: bool = True
     long_face_offsets: tuple[float, ...] = (-0.5, 0.5)
     cylinder_angles: tuple[float, ...] = (np.pi / 4, -np.pi / 4)
+    end_face_first: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -126,8 +132,8 @@ def plan_probes(pose, shape: BoxSdf | CylinderSdf, gripper_xy, params: ProbePara
         probes.append(Probe(centre + R @ point, R @ long_normal))
     end_normal = np.zeros(2)
     end_normal[long_axis] = 1.0 if local[long_axis] >= 0 else -1.0
-    probes.append(Probe(centre + R @ (end_normal * half[long_axis]), R @ end_normal))
-    return probes
+    end = Probe(centre + R @ (end_normal * half[long_axis]), R @ end_normal)
+    return [end, *probes] if params.end_face_first else [*probes, end]
 
 
 def segment_enters_box(a, b, centre, half, yaw) -> bool:

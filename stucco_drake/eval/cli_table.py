@@ -23,6 +23,7 @@ from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
 from stucco_drake.core.inputs import (
     InputError,
     non_negative_int,
+    policy_settings_of,
     positive_int,
     prepare_output_folder,
     read_stucco_params,
@@ -145,20 +146,23 @@ TABLE_CONFIG = "table_config.yaml"
 
 def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingParams | None,
                        filter_stream: int = 0, target_estimator: str = "rules",
-                       policy: str = "prescribed") -> None:  # fmt: skip
+                       policy: str = "prescribed",
+                       policy_params: Mapping | None = None) -> None:  # fmt: skip
     """Records in ``OUT/table_config.yaml`` the contact motion, STUCCO's full parameters
-    (Table I when None), the filter stream, the target estimator of the grasps and the
-    policy that chose the actions the rows of ``out`` are made with, or, when the
-    file exists, checks that they are the same: rows are keyed by scene, seed and method
-    only, so rows of two settings in one folder would pass for each other. ValueError naming
-    the first setting that differs."""
+    (Table I when None), the filter stream, the target estimator of the grasps, the
+    policy that chose the actions and how its settings differ from their defaults
+    (``policy_params``, plain values; None: they do not) the rows of ``out`` are made with,
+    or, when the file exists, checks that they are the same: rows are keyed by scene, seed
+    and method only, so rows of two settings in one folder would pass for each other.
+    ValueError naming the first setting that differs."""
     def plain(mapping):  # as YAML reads it back: lists, plain floats
         return yaml.safe_load(yaml.safe_dump(mapping))
 
     params = stucco_params if stucco_params is not None else SoftTrackingParams.sim()
     config = plain({"dx_model": dx_model, "stucco_params": params.to_mapping(),
                     "filter_stream": int(filter_stream),
-                    "target_estimator": target_estimator, "policy": policy})  # fmt: skip
+                    "target_estimator": target_estimator, "policy": policy,
+                    "policy_params": dict(policy_params or {})})  # fmt: skip
     path = Path(out) / TABLE_CONFIG
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -173,14 +177,17 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
             or not set(recorded) <= set(config)
             or not isinstance(recorded["stucco_params"], dict)):  # fmt: skip
         raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params"
-                         f" and optionally filter_stream, target_estimator, policy)")
+                         f" and optionally filter_stream, target_estimator, policy, "
+                         f"policy_params)")
     # What a file written before a setting existed lacks counts at that setting's default.
     old_params = {**plain(SoftTrackingParams.sim().to_mapping()), **recorded["stucco_params"]}
     settings = [("--dx-model ", recorded["dx_model"], dx_model),
                 ("--filter-stream ", recorded.get("filter_stream", 0), config["filter_stream"]),
                 ("--target-estimator ", recorded.get("target_estimator", "rules"),
                  target_estimator),
-                ("--policy ", recorded.get("policy", "prescribed"), policy)]
+                ("--policy ", recorded.get("policy", "prescribed"), policy),
+                ("--policy-params ", recorded.get("policy_params") or {},
+                 config["policy_params"])]
     settings += [(f"STUCCO's {name} = ", repr(old_params[name]), repr(value))
                  for name, value in config["stucco_params"].items()]  # fmt: skip
     for label, old, new in settings:
@@ -202,6 +209,7 @@ def make_table(
     filter_stream: int = 0,
     target_estimator: str = "rules",
     policy: str = "prescribed",
+    policy_params: Mapping | None = None,
 ) -> list[dict]:
     """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
 
@@ -211,7 +219,8 @@ def make_table(
     the trackers take (0: seeded with the episode's seed, as the paper's tables; K: another
     stream of draws on the same episodes, see :data:`STREAM_STRIDE`); ``target_estimator``
     where the grasps are made (see :func:`replay_cached`); ``policy`` names what chose the
-    episodes' actions (recorded only: ``sources`` produce them). Scenes whose sources share a
+    episodes' actions and ``policy_params`` how its settings differ from their defaults
+    (recorded only: ``sources`` produce them). Scenes whose sources share a
     ``family`` (the randomized layouts of one base scene) are tabled as one column group, their
     runs pooled. Rows are keyed by
     scene, seed and method only, so an OUT folder holds one of each: :func:`check_table_config`
@@ -227,7 +236,8 @@ def make_table(
     if target_estimator not in TARGET_ESTIMATORS:
         raise ValueError(f"target_estimator: expected one of {TARGET_ESTIMATORS}, "
                          f"got {target_estimator!r}")
-    check_table_config(out, dx_model, stucco_params, filter_stream, target_estimator, policy)
+    check_table_config(out, dx_model, stucco_params, filter_stream, target_estimator, policy,
+                       policy_params)
     results = RunResults(out / "runs.csv")
     replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources),
                                     dx_model=dx_model, stucco_params=stucco_params,
@@ -260,12 +270,15 @@ def make_table(
 
 
 def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=None,
-                      policies: Mapping | None = None) -> None:  # fmt: skip
+                      policies: Mapping | None = None,
+                      policy_settings: Mapping | None = None) -> None:  # fmt: skip
     """Adds ``table`` to the CLI's subparsers, over the scenes of ``sources`` and, with
     ``resolve(args, sources) -> (scene names, sources)``, whatever else it resolves (scene
     files). ``policies`` maps each closed-loop policy ``--policy`` offers besides
-    ``prescribed`` to ``make(source, scene, stucco_params, dx_model) -> EpisodeSource``, the
-    source whose episodes that policy drives (ValueError for a scene it cannot)."""
+    ``prescribed`` to ``make(source, scene, stucco_params, dx_model, settings=...) ->
+    EpisodeSource``, the source whose episodes that policy drives with those settings
+    (ValueError for a scene it cannot); ``policy_settings`` maps it to its settings class
+    (``--policy-params`` overrides its defaults)."""
     policies = dict(policies or {})
     table = subparsers.add_parser(
         "table", help="replay every method on logged episodes; write Table II and Fig. 5"
@@ -295,6 +308,9 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
                             + (", or after it 'probe': guarded touches of the likeliest target"
                                " pose of STUCCO's live hypotheses" if "probe" in policies
                                else ""))
+    table.add_argument("--policy-params", metavar="SETTINGS.yaml", default=None,
+                       help="the policy's settings as YAML overrides of its defaults (nested "
+                            "mappings for nested settings); recorded in OUT/table_config.yaml")
     table.add_argument("--workers", type=positive_int, default=None,
                        help="parallel workers (default: one per CPU)")
     table.add_argument("--executor", choices=("process", "dask"), default="process",
@@ -302,15 +318,21 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
     table.add_argument("--scheduler", default=None,
                        help="Dask scheduler address (default: start a local cluster)")
     table.set_defaults(run=functools.partial(run_table_command, sources=sources,
-                                             resolve=resolve, policies=policies))
+                                             resolve=resolve, policies=policies,
+                                             policy_settings=policy_settings))
 
 
 def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOURCES,
-                      resolve=None, policies: Mapping | None = None) -> int:  # fmt: skip
+                      resolve=None, policies: Mapping | None = None,
+                      policy_settings: Mapping | None = None) -> int:  # fmt: skip
     """Handler of ``stucco-drake table``: 0 done, 1 interrupted (rerun resumes); a bad input
-    raises InputError (the CLI's main reports it) before any simulation. ``resolve`` as
-    :func:`add_table_command`'s; each scene's set is printed first."""
+    raises InputError (the CLI's main reports it) before any simulation. ``resolve``,
+    ``policies`` and ``policy_settings`` as :func:`add_table_command`'s; each scene's set is
+    printed first."""
     stucco_params = read_stucco_params(args.stucco_params)
+    policy = getattr(args, "policy", "prescribed")
+    settings, changes = policy_settings_of(policy, getattr(args, "policy_params", None),
+                                           policy_settings or {})
     if args.scheduler is not None and args.executor != "dask":
         raise InputError("--scheduler needs --executor dask")
     try:
@@ -318,9 +340,8 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
         if resolve is not None:
             scenes, sources = resolve(args.scenes, sources)
         check_names(scenes, args.methods, sources)
-        policy = getattr(args, "policy", "prescribed")
         if policy != "prescribed":
-            make = (policies or {})[policy]
+            make = functools.partial((policies or {})[policy], settings=settings)
             sources = {**sources, **{scene: make(sources[scene], scene, stucco_params,
                                                  args.dx_model) for scene in scenes}}
     except ValueError as error:
@@ -329,7 +350,7 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
     try:
         # OUT's rows of other settings, or a runs file of another version, are refused now.
         check_table_config(out, args.dx_model, stucco_params, args.filter_stream,
-                           args.target_estimator, policy)
+                           args.target_estimator, policy, changes)
         RunResults(out / "runs.csv").rows()
         executor = make_executor(args.executor, args.workers, args.scheduler)
     except (ValueError, RuntimeError) as error:  # RuntimeError: the Dask executor without Dask
@@ -341,7 +362,8 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
                               sources=sources, dx_model=args.dx_model,
                               stucco_params=stucco_params,
                               filter_stream=args.filter_stream,
-                              target_estimator=args.target_estimator, policy=policy)
+                              target_estimator=args.target_estimator, policy=policy,
+                              policy_params=changes)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1
