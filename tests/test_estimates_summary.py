@@ -15,3 +15,26 @@ def test_confident_runs_and_touches_are_counted_per_base_and_in_all():
              for line in _calibration(rows).splitlines()[1:]}
     # confident runs, of them grasped; other runs, of them with the target touched
     assert lines == {"FB": [2, 1, 0, 0], "IB": [0, 0, 2, 1], "all": [2, 1, 2, 1]}
+
+
+def test_logs_scored_in_parallel_give_the_rows_of_one_process_in_log_order(tmp_path):
+    """Two committed development logs (an IB box, a TC can), scored by ``estimates`` in one
+    process and in two: the same rows, byte for byte, in the logs' order."""
+    import shutil
+    from pathlib import Path
+
+    from stucco_drake.cli import main
+
+    source = Path(__file__).resolve().parents[1] / "results" / "development" / "probe"
+    (tmp_path / "logs").mkdir()
+    for name in ("TC-L1001_0.npz", "IB-L1002_0.npz"):
+        shutil.copy(source / "logs" / name, tmp_path / "logs" / name)
+    for name in ("table_config.yaml", "runs.csv"):
+        shutil.copy(source / name, tmp_path / name)
+    written = []
+    for workers in ("1", "2"):
+        assert main(["estimates", "--table", str(tmp_path), "--workers", workers]) == 0
+        written.append((tmp_path / "estimates_stucco.csv").read_text(encoding="utf-8"))
+    assert written[0] == written[1]
+    scenes = [line.split(",")[1] for line in written[0].splitlines()[1:]]
+    assert scenes == ["IB-L1002", "TC-L1001"]

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import math
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from stucco_drake.core.inputs import InputError
+from stucco_drake.core.inputs import InputError, positive_int
 
 #: Outline error (m) under which an estimate is counted as near the truth in the summary.
 NEAR = 0.02
@@ -35,6 +36,9 @@ def add_estimates_command(subparsers) -> None:
                          help="the motion scales the hypotheses search, each in [0, 1] (default: "
                               "the estimator's; 0: the points where sensed, 1: where tracked); "
                               "other scales write estimates_<method>_scales_<S>...csv")
+    command.add_argument("--workers", type=positive_int, default=1,
+                         help="logs scored in parallel processes (default 1); the rows keep "
+                              "the logs' order")
     command.set_defaults(run=run_estimates)
 
 
@@ -100,13 +104,30 @@ def _motion_scales(given) -> tuple[tuple[float, ...], str]:
     return tuple(given), "_scales_" + "_".join(f"{s:g}" for s in given)
 
 
-def run_estimates(args: argparse.Namespace) -> int:
-    """Handler of ``stucco-drake estimates``."""
+def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales) -> dict:
+    """One log's row of :func:`~stucco_drake.eval.target_estimates.score_estimates` for
+    ``method`` replayed at the table's settings (runs in a worker)."""
     from stucco_drake.bor import log as bor_log
     from stucco_drake.eval.episode_log import EpisodeLog
     from stucco_drake.eval.replay import replay
-    from stucco_drake.eval.results import RunResults
     from stucco_drake.eval.target_estimates import score_estimates
+
+    log = EpisodeLog.load(path)
+    penetration = bor_log.log_penetration(log)
+    scored = []
+
+    def score(log, tracker):
+        scored.append(score_estimates(log, tracker, penetration, scales=scales))
+
+    replay(log, method, log.seed + 1000 * stream, params if method == "stucco" else None,
+           penetration=penetration, dx_model=dx_model, grasp=score)  # fmt: skip
+    return {"base": log.scene.split("-L")[0], **scored[0]}
+
+
+def run_estimates(args: argparse.Namespace) -> int:
+    """Handler of ``stucco-drake estimates``."""
+    from stucco_drake.eval.results import RunResults
+    from stucco_drake.eval.runner import make_executor
 
     out = Path(args.table)
     scales, suffix = _motion_scales(args.motion_scales)
@@ -117,23 +138,15 @@ def run_estimates(args: argparse.Namespace) -> int:
     grasped = {(row["scene"], row["seed"]): row["grasp_success"]
                for row in RunResults(out / "runs.csv").rows()
                if row["method"] == args.method}  # fmt: skip
+    task = functools.partial(score_log, method=args.method, params=params, dx_model=dx_model,
+                             stream=stream, scales=scales)
     rows = []
-    for path in paths:
-        log = EpisodeLog.load(path)
-        penetration = bor_log.log_penetration(log)
-        scored = []
-
-        def score(log, tracker, penetration=penetration, scored=scored):
-            scored.append(score_estimates(log, tracker, penetration, scales=scales))
-
-        replay(log, args.method, log.seed + 1000 * stream,
-               params if args.method == "stucco" else None, penetration=penetration,
-               dx_model=dx_model, grasp=score)  # fmt: skip
-        row = {"base": log.scene.split("-L")[0], **scored[0],
-               "grasp_success": grasped.get((log.scene, log.seed))}  # fmt: skip
-        rows.append(row)
-        print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) and not math.isnan(v)
-                       else f"{k}={v}" for k, v in row.items()), flush=True)  # fmt: skip
+    with make_executor("process", args.workers) as executor:
+        for scored in executor.map(task, paths):
+            row = {**scored, "grasp_success": grasped.get((scored["scene"], scored["seed"]))}
+            rows.append(row)
+            print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) and not math.isnan(v)
+                           else f"{k}={v}" for k, v in row.items()), flush=True)  # fmt: skip
     target = out / f"estimates_{args.method}{suffix}.csv"
     with target.open("w", newline="", encoding="utf-8") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
