@@ -121,22 +121,10 @@ def read_settings(option: str, path: str | os.PathLike | None, default):
     holds a bad key or value."""
     if path is None:
         return default
-    import yaml
+    from stucco_drake.core.settings import settings_with, yaml_file_data
 
-    from stucco_drake.core.settings import settings_with
-
-    path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(f"{option}: no such file {path}") from None
-    except (OSError, UnicodeDecodeError) as error:
-        reason = getattr(error, "strerror", None) or "not UTF-8 text"
-        raise InputError(f"{option}: cannot read {path} ({reason})") from None
-    except yaml.YAMLError as error:
-        reason = " ".join(str(error).split())  # PyYAML's message spans several lines
-        raise InputError(f"{option}: {path} is not valid YAML ({reason})") from None
-    try:
+        data = yaml_file_data(path, option)
         return settings_with(default, data if data is not None else {}, f"{option} {path}: ")
     except ValueError as error:
         raise InputError(str(error)) from None

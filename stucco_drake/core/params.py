@@ -7,7 +7,7 @@ import math
 from collections.abc import Mapping
 from pathlib import Path
 
-import yaml
+from stucco_drake.core.settings import yaml_file_data, yaml_text_data
 
 
 @dataclasses.dataclass(frozen=True)
@@ -158,21 +158,10 @@ class SoftTrackingParams:
             "\n" not in source and Path(source).suffix in (".yaml", ".yml")
         )
         if is_file:
-            path = Path(source)
-            if not path.exists():
-                raise ValueError(f"SoftTrackingParams: no such file {path}")
-            try:
-                text, where = path.read_text(encoding="utf-8"), str(path)
-            except (OSError, UnicodeDecodeError) as error:
-                reason = getattr(error, "strerror", None) or "not UTF-8 text"
-                raise ValueError(f"SoftTrackingParams: cannot read {path} ({reason})") from None
+            data = yaml_file_data(source, "SoftTrackingParams")
+            where = str(source)
         else:
-            text, where = source, "<string>"
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as error:
-            reason = " ".join(str(error).split())  # PyYAML's message spans several lines
-            raise ValueError(f"SoftTrackingParams: {where} is not valid YAML ({reason})") from None
+            data, where = yaml_text_data(source, "SoftTrackingParams", "<string>"), "<string>"
         try:
             return cls.from_mapping(data if data is not None else {})
         except ValueError as error:

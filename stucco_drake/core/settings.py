@@ -13,6 +13,33 @@ from __future__ import annotations
 import dataclasses
 import numbers
 from collections.abc import Mapping
+from pathlib import Path
+
+
+def yaml_text_data(text: str, who: str, where: str):
+    """The data of the YAML ``text`` read from ``where`` (None for an empty document);
+    ValueError ``"{who}: {where} is not valid YAML (...)"`` on one line otherwise."""
+    import yaml
+
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        reason = " ".join(str(error).split())  # PyYAML's message spans several lines
+        raise ValueError(f"{who}: {where} is not valid YAML ({reason})") from None
+
+
+def yaml_file_data(path, who: str):
+    """The data of the YAML file at ``path`` (None for an empty file); ValueError on one line
+    starting ``"{who}: "`` when it is missing, unreadable or not valid YAML."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ValueError(f"{who}: no such file {path}") from None
+    except (OSError, UnicodeDecodeError) as error:
+        reason = getattr(error, "strerror", None) or "not UTF-8 text"
+        raise ValueError(f"{who}: cannot read {path} ({reason})") from None
+    return yaml_text_data(text, who, str(path))
 
 
 def _checked(default, value, where: str):
