@@ -6,6 +6,7 @@ from __future__ import annotations
 import multiprocessing
 
 import numpy as np
+import pytest
 
 from stucco_drake.core.npz import save_npz_atomically
 
@@ -39,9 +40,7 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
         def __array__(self, *args, **kwargs):
             raise RuntimeError("cannot be saved")
 
-    try:
+    with pytest.raises(RuntimeError, match="cannot be saved"):
         save_npz_atomically(path, data=Unsaveable())
-    except RuntimeError:
-        pass
     np.testing.assert_array_equal(np.load(path)["data"], np.arange(3.0))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["old.npz"]
