@@ -20,14 +20,17 @@ from stucco_drake.core.rummaging import BeliefRummagingPolicy, RummageParams
 MAX_STEP = 0.03
 START = np.array([0.0, 0.1])
 WIDTH = 0.1  # FOOTPRINT's extent along y (m)
+# Lanes across the band with both its ends as lanes (not laid out from the start).
+BAND = CoverageParams(from_start=False)
+BAND_NEAREST = CoverageParams(nearest_first=True, from_start=False)
 
 
 def test_lanes_tile_the_band_one_footprint_apart():
     """The band -0.17..0.28 (0.45 m) in lanes at most 0.1 m apart: ceil(4.5) + 1 = 6 lanes,
     0.09 m apart, both ends included; lane after lane from the end nearer the start."""
-    lanes = lane_centres(CoverageParams(), WIDTH)
+    lanes = lane_centres(BAND, WIDTH)
     assert lanes == pytest.approx(np.linspace(-0.17, 0.28, 6), abs=1e-12)
-    points = coverage_waypoints(START, CoverageParams(), WIDTH)
+    points = coverage_waypoints(START, BAND, WIDTH)
     assert points[:, 1].reshape(-1, 3)[:, 0] == pytest.approx(lanes[::-1])  # 0.1 nearer 0.28
     assert points[1::3, 0] == pytest.approx(np.full(6, 0.38))
     assert points[0::3, 0] == pytest.approx(np.zeros(6))
@@ -36,8 +39,17 @@ def test_lanes_tile_the_band_one_footprint_apart():
 def test_nearest_first_sweeps_out_from_the_start():
     """From y 0.1: the lane at 0.10, out to the nearer end (0.19, 0.28), then from the start
     the other way (0.01, -0.08, -0.17)."""
-    points = coverage_waypoints(START, CoverageParams(nearest_first=True), WIDTH)
+    points = coverage_waypoints(START, BAND_NEAREST, WIDTH)
     assert points[0::3, 1] == pytest.approx([0.10, 0.19, 0.28, 0.01, -0.08, -0.17])
+
+
+def test_lanes_from_the_start_reach_past_both_ends_of_the_band():
+    """From y 0.1, lanes 0.1 apart: one straight ahead, the others out to the first at or
+    beyond each end of the band -0.17..0.28: -0.2 .. 0.3, six lanes."""
+    lanes = lane_centres(CoverageParams(), WIDTH, START[1])
+    assert lanes == pytest.approx([-0.2, -0.1, 0.0, 0.1, 0.2, 0.3], abs=1e-12)
+    points = coverage_waypoints(START, CoverageParams(nearest_first=True), WIDTH)
+    assert points[0::3, 1] == pytest.approx([0.1, 0.2, 0.3, 0.0, -0.1, -0.2], abs=1e-12)
 
 
 def test_lanes_stop_short_of_what_the_arm_cannot_reach():
@@ -45,13 +57,13 @@ def test_lanes_stop_short_of_what_the_arm_cannot_reach():
     back from 0.38), the others to 0.38."""
     def inside(xy):
         return xy[0] <= 0.3 + 1e-9 or xy[1] <= 0.2
-    points = coverage_waypoints(START, CoverageParams(), WIDTH, inside)
+    points = coverage_waypoints(START, BAND, WIDTH, inside)
     far = points[1::3]
     assert far[0] == pytest.approx([0.30, 0.28]) and far[1:, 0] == pytest.approx(0.38)
 
 
 def test_steps_pass_through_every_waypoint_within_the_clip():
-    points = coverage_waypoints(START, CoverageParams(), WIDTH)
+    points = coverage_waypoints(START, BAND, WIDTH)
     steps = waypoint_steps(START, points, MAX_STEP)
     assert np.abs(steps).max() <= MAX_STEP + 1e-12
     ends = START + np.cumsum(steps, axis=0)
@@ -99,13 +111,15 @@ def play(policy, pose, belief, limit=400, contact_y=None):
 
 
 def test_with_nothing_felt_the_policy_plays_the_whole_sweep():
-    """Nothing on the table: every lane is pushed to its far end, in the sweep's own steps
-    (its lanes nearest the start first), and the belief is never asked."""
+    """Nothing on the table, lanes from the start's x: every lane is pushed to its far end,
+    in the sweep's own steps (its lanes nearest the start first), and the belief is never
+    asked."""
     policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
-                                   RummageParams(max_actions=400))
+                                   RummageParams(coverage=BAND_NEAREST, max_actions=400,
+                                                 transit_back=0.0))
     belief = Belief(None, 1)
     _positions, steps, _ = play(policy, None, belief)
-    lanes = coverage_waypoints(START, CoverageParams(nearest_first=True), WIDTH)
+    lanes = coverage_waypoints(START, BAND_NEAREST, WIDTH)
     sweep = waypoint_steps(START, lanes, MAX_STEP)
     assert len(steps) == len(sweep) and steps == pytest.approx(sweep, abs=1e-12)
     assert belief.asked == 0
@@ -125,7 +139,8 @@ def test_the_policy_backs_off_probes_and_stops_once_confident():
     belief is confident and the policy stops, long before the sweep's 177 actions."""
     pose = np.array([0.3, 0.17, np.radians(90)])
     belief = Belief(pose, needed=2)
-    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                   RummageParams(coverage=BAND_NEAREST))
     positions, steps, contacts = play(policy, pose, belief)
     first = int(np.argmax(contacts))
     assert positions[first + 1][1] == pytest.approx(0.10)
@@ -141,7 +156,7 @@ def test_a_lane_through_the_believed_target_is_pushed_guarded():
     straight through the believed box, is pushed until it touches the box's near end and
     backed off from, without pressing into it."""
     pose = np.array([0.3, 0.17, np.radians(90)])
-    params = RummageParams(max_rounds=1, max_actions=400)
+    params = RummageParams(coverage=BAND_NEAREST, max_rounds=1, max_actions=400)
     policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
     positions, _steps, contacts = play(policy, pose, Belief(pose, needed=99))
     assert policy.rounds == 1
@@ -154,14 +169,16 @@ def test_a_lane_through_the_believed_target_is_pushed_guarded():
 
 def test_a_felt_object_the_belief_does_not_place_is_touched_beside_then_left():
     """No hypotheses (the belief says None): each push that touches the box is backed off
-    from and made again 3 cm to one side, then 3 cm to the other, then the lane is left. The
+    from and made again 3 cm to one side, then 3 cm to the other (each from the lanes' x, 4
+    cm behind the start), then the lane is left. The
     box spans y 0.14..0.20, the footprint 5 cm either side of its origin: lane 0.10 (the
     first, nearest the start) touches at y 0.10 and 0.13, and its push at 0.07 passes the
     box to the far end; lane 0.19 touches at 0.19, 0.22 and 0.16; lanes 0.28 and 0.01 pass
     it."""
     pose = np.array([0.3, 0.17, np.radians(90)])
     policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
-                                   RummageParams(max_actions=400))
+                                   RummageParams(coverage=BAND_NEAREST, max_actions=400,
+                                                 push_through_below=0.0))
     positions, _steps, contacts = play(policy, pose, lambda: None)
     assert policy.rounds == 0 and policy.contacts == int(contacts.sum())
     touched_y = positions[1:][contacts][:, 1]
@@ -169,7 +186,10 @@ def test_a_felt_object_the_belief_does_not_place_is_touched_beside_then_left():
     beside = np.abs(positions[:, 1] - 0.07) < 1e-9
     assert positions[beside, 0].max() == pytest.approx(0.38)
     assert np.max(positions[:, 1]) == pytest.approx(0.28)
-    assert positions[-1, 0] == pytest.approx(0, abs=1e-12)
+    assert positions[-1, 0] == pytest.approx(-0.04, abs=1e-12)  # lanes end 4 cm behind
+    # Every sideways move, to a lane or to a touch beside, is made 4 cm behind the start.
+    sideways = np.abs(np.diff(positions[:, 1])) > 1e-9
+    assert positions[:-1][sideways, 0] == pytest.approx(-0.04, abs=1e-12)
     assert touches_are_guarded(positions, contacts, pose)
 
 
@@ -184,7 +204,88 @@ def test_a_touch_on_one_side_of_the_gripper_is_followed_that_way():
         return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
 
     policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
-                                   RummageParams(max_actions=400))
+                                   RummageParams(coverage=BAND_NEAREST, max_actions=400,
+                                                 push_through_below=0.0))
     positions, _steps, contacts = play(policy, pose, lambda: None, contact_y=overlap_middle)
     touched_y = positions[1:][contacts][:, 1]
     assert touched_y[:3] == pytest.approx([0.10, 0.13, 0.16], abs=1e-9)
+
+
+def test_lanes_begin_and_end_behind_the_start():
+    """Nothing on the table: every lane begins and ends ``transit_back`` (4 cm) behind the
+    start's x and is pushed to the same far end (0.38 m ahead of the start) as the sweep's."""
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                   RummageParams(coverage=BAND_NEAREST, max_actions=400))
+    positions, _steps, _ = play(policy, None, Belief(None, 1))
+    for y in lane_centres(BAND, WIDTH):
+        on_lane = positions[np.abs(positions[:, 1] - y) < 1e-9, 0]
+        assert on_lane.min() == pytest.approx(-0.04) and on_lane.max() == pytest.approx(0.38)
+
+
+# A box just in front of the start's x and to -y of it: x 0.03..0.09, y -0.114..0.044 (the
+# footprint reaches 4 cm ahead of the gripper's origin, 5 cm to either side).
+NEAR_BOX = np.array([0.06, -0.035, 0.0])
+
+
+def test_a_travel_that_keeps_bumping_gives_up_the_lanes_beyond():
+    """Lanes travelled between at the start's x: going from lane 0.28 down to lane 0.01 the
+    footprint meets the box at y 0.094; after the third bump (``lane_bumps`` 2) the lanes
+    beyond on that side (0.01, -0.08, -0.17) are given up and, none being left, the policy
+    stops: it never gets below y 0.09. Travelled 4 cm further back, it passes the box
+    without a bump and pushes those lanes."""
+    params = RummageParams(coverage=BAND_NEAREST, max_actions=400, transit_back=0.0)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    positions, steps, contacts = play(policy, NEAR_BOX, lambda: None)
+    assert policy.bumps == 3 and int(contacts.sum()) == 3
+    assert positions[:, 1].min() > 0.09 and len(steps) < 400
+    behind = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                   dataclasses.replace(params, transit_back=0.04))
+    positions, _steps, _ = play(behind, NEAR_BOX, lambda: None)
+    assert behind.bumps == 0 and positions[:, 1].min() == pytest.approx(-0.17)
+
+
+def test_a_lane_the_belief_does_not_place_is_pushed_through_once():
+    """No hypotheses: once lane 0.19's touch and its two touches beside are spent (as in the
+    test above), the lane is pushed again from its start, and the push goes on after it
+    touches the box (at 30 N the box does not move: the next step stalls against it and the
+    push is given up). Every other lane's touches are as without the shove."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                   RummageParams(coverage=BAND_NEAREST, max_actions=400))
+    positions, steps, contacts = play(policy, pose, lambda: None)
+    assert policy.shoves == 1
+    touched = np.flatnonzero(contacts)
+    assert positions[1:][touched][:, 1] == pytest.approx(
+        [0.10, 0.13, 0.19, 0.22, 0.16, 0.19, 0.19], abs=1e-9)
+    # The shove's first touch is followed by another step ahead, not a back-off.
+    assert steps[touched[5] + 1][0] > 0 and touches_are_guarded(
+        positions, contacts, pose)
+
+
+class Misplaced:
+    """Pose hypotheses stand-in, certain (0.9999) from the start that the box lies at
+    ``pose``, where nothing is."""
+
+    def __init__(self, pose):
+        self.pose, self.confidence = pose, 0.9999
+
+    def __call__(self):
+        return self
+
+
+def test_a_confidence_no_probe_has_borne_out_does_not_stop_the_policy():
+    """The box at y 0.14..0.20, believed (at 0.9999) at y -0.23..-0.17 where nothing is: the
+    first push touches the real box; the probe round goes where the belief says and touches
+    nothing, so the policy does not stop there but explores on; without ``verified_stop`` it
+    stops at that first touch."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    belief = Misplaced(np.array([0.3, -0.2, np.radians(90)]))
+    params = RummageParams(coverage=BAND_NEAREST, max_actions=400)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    _positions, steps, contacts = play(policy, pose, belief)
+    first = int(np.argmax(contacts))
+    assert policy.rounds >= 1 and policy.touches == 0 and len(steps) > first + 40
+    hasty = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                  dataclasses.replace(params, verified_stop=False))
+    _positions, steps, _ = play(hasty, pose, belief)
+    assert len(steps) == first + 1 and hasty.rounds == 0

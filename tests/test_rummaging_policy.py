@@ -58,7 +58,8 @@ def test_probes_touch_the_box_again_and_stop_within_the_budget(probed_ib):
 
 # One lane, through IB's box (x 0.10-0.26 at y -0.03..0.03 by the scene file: 0.18, 0.0,
 # yawed 97.4 degrees, 6 by 15.8 cm).
-ONE_LANE = RummageParams(coverage=CoverageParams(y_range=(0.01, 0.01)), max_actions=20)
+ONE_LANE = RummageParams(coverage=CoverageParams(y_range=(0.01, 0.01), from_start=False),
+                         max_actions=20)
 
 
 @pytest.fixture(scope="module")
@@ -85,19 +86,22 @@ def rummaged_ib():
     return result, truth, steps, state.policy
 
 
-def test_belief_rummaging_touches_the_box_beside_until_the_belief_places_it(rummaged_ib):
+def test_belief_rummaging_touches_the_box_again_beside_its_first_touch(rummaged_ib):
     """The lane's push reaches the box; the action after the first sensed contact steps 2 cm
-    back along -x; with no hypotheses from one touch, the box is pushed again 3 cm to either
-    side, and after those three touches (each on the box by Drake's contact results) the
-    hypotheses place it and a probe round begins; the budget ends the episode."""
+    back along -x; with no hypotheses from one touch, the gripper goes back to the lanes' x
+    (4 cm behind its start: pure -x steps) before it moves sideways, and pushes the box again
+    3 cm along, which touches it again (both touches on the box by Drake's contact results);
+    the budget ends the episode."""
     result, truth, steps, policy = rummaged_ib
     first = next(k for k, names in enumerate(truth) if names)
     assert "target" in truth[first]
     assert steps[first + 1] == pytest.approx([-ONE_LANE.back_off, 0.0])
     pushes = [k for k, step in steps.items()
               if step is not None and np.allclose(step, [-ONE_LANE.back_off, 0.0])]
-    assert len(pushes) >= 3 and all("target" in truth[k - 1] for k in pushes[:3])
-    assert policy.contacts >= 3 and policy.confidence > 0
+    assert len(pushes) >= 2 and all("target" in truth[k - 1] for k in pushes[:2])
+    sideways = next(k for k in range(first + 1, pushes[1]) if abs(steps[k][1]) > 1e-3)
+    assert all(steps[k][0] < 0 and abs(steps[k][1]) < 1e-4 for k in range(first + 1, sideways))
+    assert policy.contacts >= 2 and policy.rounds == 0
     assert result.n_actions == policy.actions == ONE_LANE.max_actions
 
 

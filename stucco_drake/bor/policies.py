@@ -94,4 +94,5 @@ def policy_info(policy: RummagingPolicy, context, prescribed: int) -> dict:
                 "touches": core.touches, "probes": core.probes_done, "bumps": core.bumps}
     return {"name": "belief", "actions": core.actions, "rounds": core.rounds,
             "touches": core.touches, "contacts": core.contacts, "bumps": core.bumps,
-            "confidence": core.confidence}
+            "shoves": core.shoves, "confidence": core.confidence,
+            "confidence_trace": [[int(k), float(c)] for k, c in core.trace]}

@@ -31,6 +31,10 @@ class CoverageParams:
             of the band, then the rest of the band from the start outwards (objects in
             front of the start are met first); otherwise (the raster) start at the band's
             end nearer the gripper and sweep to the other end (the band is crossed once).
+        from_start: lay the lanes out from the gripper's start (one lane straight ahead of
+            it, the others ``lane_width`` apart, out to the first beyond each end of
+            ``y_range``): where the user puts the gripper is where the search begins.
+            Otherwise both ends of ``y_range`` are lanes and the lanes share the rest evenly.
     """
 
     depth: float = 0.38
@@ -38,15 +42,21 @@ class CoverageParams:
     y_range: tuple[float, float] = (-0.17, 0.28)
     lane_width: float | None = None
     nearest_first: bool = False
+    from_start: bool = True
 
 
-def lane_centres(params: CoverageParams, footprint_width: float) -> np.ndarray:
-    """The lanes' y (m), evenly spaced across ``y_range`` at most ``lane_width`` (or
-    ``footprint_width``) apart, both ends included."""
+def lane_centres(params: CoverageParams, footprint_width: float,
+                 start_y: float = 0.0) -> np.ndarray:  # fmt: skip
+    """The lanes' y (m), in increasing order, at most ``lane_width`` (or ``footprint_width``)
+    apart across ``y_range``: from ``start_y`` (``from_start``), else both ends included."""
     width = params.lane_width or float(footprint_width)
     if width <= 0:
         raise ValueError(f"coverage lane width must be positive, got {width}")
     lo, hi = params.y_range
+    if params.from_start:
+        first = int(np.floor((lo - start_y) / width + 1e-9))
+        last = int(np.ceil((hi - start_y) / width - 1e-9))
+        return start_y + width * np.arange(first, last + 1)
     count = int(np.ceil((hi - lo) / width - 1e-9)) + 1
     return np.linspace(lo, hi, max(count, 1))
 
@@ -59,8 +69,8 @@ def coverage_waypoints(start_xy, params: CoverageParams, footprint_width: float,
     ``in_workspace``, a lane whose far end lies outside is pushed less deep (in 5 mm steps)
     and one whose start does is left out."""
     inside = in_workspace or (lambda xy: True)
-    lanes = lane_centres(params, footprint_width)
     x0, start_y = (float(v) for v in np.asarray(start_xy, dtype=np.float64)[:2])
+    lanes = lane_centres(params, footprint_width, start_y)
     if lanes[-1] - start_y < start_y - lanes[0]:
         lanes = lanes[::-1]
     if params.nearest_first:

@@ -7,10 +7,20 @@ that senses contact ends there (the gripper backs off instead of shoving on), an
 asked what was felt. When the target-pose hypotheses put the target somewhere, a round of
 guarded face probes (:class:`~.probing.FaceProbePolicy`) touches it where they say; when their
 confidence (the posterior probability that the grasp closes with margin) passes
-``stop_confidence`` the policy stops and the robot grasps. Otherwise it goes on with the next
-lane; a lane through the likeliest target is still pushed, guarded: it touches the target's
-near face again (at 30 N the gripper does not shove a 10 kg target away), more evidence where
-it is least certain. It also stops when the lanes or the action budget run out.
+``stop_confidence``, and the last probe round touched the target where they put it, the
+policy stops and the robot grasps (the hypotheses only explain what was felt: until a
+prediction of theirs has been touched, a target never touched may be what they miss).
+Otherwise it goes on with the next lane; a lane through the likeliest target is still pushed,
+guarded: it touches the target's near face again (at 30 N the gripper does not shove a 10 kg
+target away), more evidence where it is least certain. It also stops when the lanes or the
+action budget run out.
+
+Two things keep it from wearing itself out on clutter. The gripper travels between lanes a
+little behind its start, clear of what stands just in front of it, and a travel that keeps
+bumping into something gives up every lane beyond it on that side (they are reached the same
+way). And a lane whose felt object the belief still does not place with some confidence, once
+touched again or probed, is pushed through to its far end, contacts ignored: a guarded push
+never gets past clutter standing in front of the target, a shove moves it aside.
 
 Planar points (x, y) in the world frame W (m); the gripper's yaw is fixed.
 """
@@ -38,10 +48,15 @@ class RummageParams:
         stop_confidence: the target confidence at which the policy stops (the confidence from
             which a run counts as confident, ``stucco_drake.eval.sets.CONFIDENT_FROM``, chosen
             on the development layouts).
+        verified_stop: stop only once the last probe round touched the target where the
+            hypotheses put it (a confidence from a few points, none of them predicted, is
+            no evidence that the target is among what was felt).
         back_off: step back along -x after a push that sensed contact.
         arrive_tolerance: distance at which a lane's waypoint counts as reached.
         max_actions: actions in all.
         max_rounds: probe rounds in all.
+        lane_rounds: probe rounds per lane (a round spent on clutter the belief took for the
+            target leaves the rounds of the lanes after it).
         lane_bumps: contacts while moving to or from a lane's push before the lane is left.
         retouches: how many times a felt object the belief does not place yet is pushed
             again before the lane is left (a single touch leaves too few points for any
@@ -50,20 +65,35 @@ class RummageParams:
             centre line), else to one side, then the other.
         retouch_step: see ``retouches``.
         side_margin: see ``retouches``.
+        transit_back: how far behind the start (along -x, as far as the workspace allows)
+            the lanes begin and end: travel between lanes then passes clear of objects just
+            in front of the start, which the gripper's front (4 cm ahead of its origin)
+            would graze.
+        push_through_below: a lane whose felt object, once touched again or probed, the
+            belief places with a confidence below this is pushed through to its far end,
+            contacts ignored (once per lane; 0: never).
+        probe_before_shove: whether a lane's felt object is touched again or probed before
+            the lane is pushed through (otherwise the push goes through at once when the
+            belief is below ``push_through_below``, and the round comes after).
     """
 
     coverage: CoverageParams = dataclasses.field(
         default_factory=lambda: CoverageParams(nearest_first=True))
     probe: ProbeParams = dataclasses.field(default_factory=lambda: ProbeParams(max_actions=30))
     stop_confidence: float = 0.999
+    verified_stop: bool = True
     back_off: float = 0.02
     arrive_tolerance: float = 0.005
     max_actions: int = 120
-    max_rounds: int = 3
+    max_rounds: int = 6
+    lane_rounds: int = 2
     lane_bumps: int = 2
     retouches: int = 2
     retouch_step: float = 0.03
     side_margin: float = 0.01
+    transit_back: float = 0.04
+    push_through_below: float = 0.5
+    probe_before_shove: bool = True
 
 
 def _belief_of(belief) -> tuple[np.ndarray | None, float]:
@@ -103,7 +133,15 @@ class BeliefRummagingPolicy:
         width = float(np.ptp(self.footprint[:, 1]))
         self.lanes = coverage_waypoints(start_xy, self.params.coverage, width,
                                         self.in_workspace).reshape(-1, 3, 2)
+        self._set_back(self.lanes, self.params.transit_back)
         self.actions = self.rounds = self.touches = self.contacts = self.bumps = 0
+        self.shoves = 0
+        # (action, confidence) each time the belief was asked.
+        self.trace: list[tuple[int, float]] = []
+        self._lane_rounds = 0
+        self._skipped: set[int] = set()
+        self._shoved = False
+        self._verified = False
         self.confidence, self.pose = 0.0, None
         self._lane, self._lane_bumps, self._retouches = -1, 0, 0
         self._touch_y, self._contact_xy = 0.0, None
@@ -114,11 +152,23 @@ class BeliefRummagingPolicy:
         self._last_step, self._moving, self._last_xy = np.zeros(2), False, None
         self._next_lane()
 
+    def _set_back(self, lanes: np.ndarray, back: float) -> None:
+        """Moves the lanes' ends (their first and last waypoints) ``back`` along -x, less
+        where that would leave the workspace (5 mm steps)."""
+        for lane in lanes:
+            x = lane[0, 0] - back
+            while x < lane[0, 0] and not (self.in_workspace(np.array([x, lane[0, 1]]))
+                                          and self.in_workspace(np.array([x, lane[2, 1]]))):
+                x += 0.005
+            lane[0, 0] = lane[2, 0] = min(x, lane[0, 0])
+
     def copy(self) -> BeliefRummagingPolicy:
         """A copy whose play does not change this one (settings, shape, footprint and lanes
         shared, read only)."""
         other = copy.copy(self)
         other._queue = list(self._queue)
+        other._skipped = set(self._skipped)
+        other.trace = list(self.trace)
         other._probe = None if self._probe is None else self._probe.copy()
         return other
 
@@ -146,7 +196,19 @@ class BeliefRummagingPolicy:
 
     def _believe(self, belief) -> float:
         self.pose, self.confidence = _belief_of(belief)
+        self.trace.append((self.actions, self.confidence))
         return self.confidence
+
+    def _known(self, belief) -> bool:
+        """Whether to stop: the belief's confidence (asked) passes ``stop_confidence`` and,
+        with ``verified_stop``, the last probe round touched the target."""
+        confident = self._believe(belief) >= self.params.stop_confidence
+        return confident and (self._verified or not self.params.verified_stop)
+
+    def _may_probe(self) -> bool:
+        p = self.params
+        return (self.pose is not None and self.rounds < p.max_rounds
+                and self._lane_rounds < p.lane_rounds)
 
     def _decide(self, xy, in_contact: bool, belief):
         if self._probe is not None:
@@ -154,48 +216,71 @@ class BeliefRummagingPolicy:
             if step is not None:
                 return step
             self.touches += self._probe.touches
+            self._verified = self._probe.touches > 0
             self.bumps += self._probe.bumps
             self.rounds += 1
+            self._lane_rounds += 1
             self._probe = None
-            if self._believe(belief) >= self.params.stop_confidence:
+            if self._known(belief):
                 return None
-            self._withdraw(xy)
+            self._leave_lane(xy)
         elif in_contact and self._moving:
             self.contacts += 1
+            kind = self._queue[0][0] if self._queue else "move"
+            if kind == "shove":  # contacts ignored: the push goes on
+                return self._follow(xy, belief)
             self._moving = False
-            if self._queue and self._queue[0][0] == "push":
+            if kind == "push":
                 return self._felt(xy, belief)
             self.bumps += 1
             self._lane_bumps += 1
             if self._lane_bumps > self.params.lane_bumps:
+                self._skip_beyond(xy)
                 self._next_lane()
             back = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
             return -back * self.params.back_off
-        return self._follow(xy)
+        return self._follow(xy, belief)
+
+    def _assess(self, xy, belief) -> np.ndarray | None:
+        """After a lane pushed through: stop if the target is known, else probe it if the
+        belief places it (and rounds are left), else go on."""
+        if self._known(belief):
+            return None
+        if self._may_probe():
+            self._probe = self._new_probe()
+            return self._decide(xy, False, belief)
+        return self._follow(xy, belief)
+
+    def _new_probe(self) -> FaceProbePolicy:
+        return FaceProbePolicy(self.shape, self.footprint, self.max_step, self.params.probe,
+                               self.in_workspace)
 
     def _felt(self, xy, belief) -> np.ndarray | None:
-        """A push sensed contact: stop if the target is known, else probe it if the belief
+        """A push sensed contact: stop if the target is known; else push the lane through
+        if the belief is low and ``probe_before_shove`` is off; else probe it if the belief
         places it (and rounds are left), else touch it again beside the first touch (see
-        ``retouches``) or withdraw; first back off."""
-        if self._believe(belief) >= self.params.stop_confidence:
+        ``retouches``), else leave the lane (:meth:`_leave_lane`); first back off."""
+        if self._known(belief):
             return None
         back = np.array([-self.params.back_off, 0.0])
-        if self.pose is not None and self.rounds < self.params.max_rounds:
-            self._probe = FaceProbePolicy(self.shape, self.footprint, self.max_step,
-                                          self.params.probe, self.in_workspace)  # fmt: skip
+        shove_now = (not self.params.probe_before_shove and not self._shoved
+                     and self.confidence < self.params.push_through_below)
+        if shove_now:
+            self._leave_lane(xy)
+        elif self._may_probe():
+            self._probe = self._new_probe()
         elif self._retouches < self.params.retouches:
             if self._retouches == 0:
                 self._touch_y = float(xy[1])
             # Which way is decided after the back-off, once this touch's contacts are known.
             self._queue = [("retouch", np.array([self._queue[0][1][0], self._touch_y]))]
         else:
-            self._withdraw(xy)
+            self._leave_lane(xy)
         return back
 
     def _retouch(self, xy, far_touch) -> list[tuple[str, np.ndarray]]:
         """The waypoints of the next touch beside the first (at y ``far_touch[1]``, pushed to
-        x ``far_touch[0]``): sideways from where the gripper backed off to, the push, and
-        back to the lanes' x."""
+        x ``far_touch[0]``): back to the lanes' x, sideways, the push, and back."""
         p = self.params
         k, self._retouches = self._retouches, self._retouches + 1
         side = 0.0 if self._contact_xy is None else self._contact_xy[1] - far_touch[1]
@@ -204,22 +289,47 @@ class BeliefRummagingPolicy:
         else:  # centred: one side, then the other
             offset = (1.0 if k % 2 == 0 else -1.0) * (k // 2 + 1) * p.retouch_step
         y = far_touch[1] + offset
-        return [("move", np.array([xy[0], y])), ("push", np.array([far_touch[0], y])),
-                ("move", np.array([self.lanes[self._lane, 0, 0], y]))]
+        # Sideways along the lanes' x, behind the start: beside the felt object, a step
+        # back from it, often stands its neighbour.
+        lane_x = self.lanes[self._lane, 0, 0]
+        return [("move", np.array([lane_x, xy[1]])), ("move", np.array([lane_x, y])),
+                ("push", np.array([far_touch[0], y])), ("move", np.array([lane_x, y]))]
 
     def _withdraw(self, xy) -> None:
         """Back along -x to the lanes' x at ``xy``'s y; then the next lane."""
         self._queue = [("move", np.array([self.lanes[self._lane, 0, 0], xy[1]]))]
 
+    def _leave_lane(self, xy) -> None:
+        """Done with what the lane's push felt: withdraw, or, where the belief places it
+        with a confidence below ``push_through_below``, push the lane through (once)."""
+        if self._shoved or self.confidence >= self.params.push_through_below:
+            self._withdraw(xy)
+            return
+        self._shoved, self.shoves = True, self.shoves + 1
+        start, far, back = self.lanes[self._lane]
+        self._queue = [("move", np.array([start[0], xy[1]])), ("move", start),
+                       ("shove", far), ("move", back), ("assess", far)]
+
+    def _skip_beyond(self, xy) -> None:
+        """The travel to a waypoint keeps bumping: the lanes that lie beyond the gripper on
+        that side (reached the same way) are given up."""
+        side = np.sign(self._queue[0][1][1] - xy[1]) if self._queue else 0.0
+        for j in range(self._lane + 1, len(self.lanes)):
+            if side and (self.lanes[j, 0, 1] - xy[1]) * side > 0:
+                self._skipped.add(j)
+
     def _next_lane(self) -> None:
         self._lane, self._lane_bumps, self._retouches = self._lane + 1, 0, 0
+        self._shoved, self._lane_rounds = False, 0
+        while self._lane in self._skipped:
+            self._lane += 1
         if self._lane < len(self.lanes):
             start, far, back = self.lanes[self._lane]
             self._queue = [("move", start), ("push", far), ("move", back)]
         else:
             self._queue = []
 
-    def _follow(self, xy) -> np.ndarray | None:
+    def _follow(self, xy, belief) -> np.ndarray | None:
         """The step towards the next waypoint (the next lane's once the queue is done), or
         None once the lanes are done. A waypoint the gripper stopped moving towards without
         sensing contact (held by something it does not feel) is given up: a push's lane is
@@ -240,6 +350,9 @@ class BeliefRummagingPolicy:
             if kind == "retouch":
                 self._queue[:1] = self._retouch(xy, point)
                 continue
+            if kind == "assess":
+                self._queue.pop(0)
+                return self._assess(xy, belief)
             if np.linalg.norm(point - xy) < self.params.arrive_tolerance:
                 self._queue.pop(0)
                 continue
