@@ -62,6 +62,17 @@ def test_lanes_stop_short_of_what_the_arm_cannot_reach():
     assert far[0] == pytest.approx([0.30, 0.28]) and far[1:, 0] == pytest.approx(0.38)
 
 
+def test_lanes_moved_back_stop_at_the_workspace():
+    """Lanes 4 cm behind the start (x 0) in a workspace that begins at x = -0.02: each lane
+    begins and ends at -0.02 (5 mm steps forward from -0.04), its far end still at 0.38."""
+    def inside(xy):
+        return xy[0] >= -0.02 - 1e-9
+    points = coverage_waypoints(START, BAND, WIDTH, inside, back=0.04)
+    assert points[0::3, 0] == pytest.approx(np.full(6, -0.02))
+    assert points[2::3, 0] == pytest.approx(np.full(6, -0.02))
+    assert points[1::3, 0] == pytest.approx(np.full(6, 0.38))
+
+
 def test_steps_pass_through_every_waypoint_within_the_clip():
     points = coverage_waypoints(START, BAND, WIDTH)
     steps = waypoint_steps(START, points, MAX_STEP)

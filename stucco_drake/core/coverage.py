@@ -63,11 +63,12 @@ def lane_centres(params: CoverageParams, footprint_width: float,
 
 def coverage_waypoints(start_xy, params: CoverageParams, footprint_width: float,
                        in_workspace: Callable[[np.ndarray], bool] | None = None,
-                       ) -> np.ndarray:  # fmt: skip
+                       back: float = 0.0) -> np.ndarray:  # fmt: skip
     """(M, 2) the sweep's waypoints (W): lane by lane in the order ``nearest_first`` says,
-    each (x0, y), (x0 + depth, y), (x0, y), x0 the start's x. With
-    ``in_workspace``, a lane whose far end lies outside is pushed less deep (in 5 mm steps)
-    and one whose start does is left out."""
+    each (x0 - back, y), (x0 + depth, y), (x0 - back, y), x0 the start's x. With
+    ``in_workspace``, a lane whose far end lies outside is pushed less deep and one whose
+    end lies outside is moved less far back (both in 5 mm steps); a lane whose point at x0
+    lies outside is left out."""
     inside = in_workspace or (lambda xy: True)
     x0, start_y = (float(v) for v in np.asarray(start_xy, dtype=np.float64)[:2])
     lanes = lane_centres(params, footprint_width, start_y)
@@ -82,7 +83,10 @@ def coverage_waypoints(start_xy, params: CoverageParams, footprint_width: float,
         while depth > 0 and not inside(np.array([x0 + depth, y])):
             depth -= 0.005
         if depth > 0 and inside(np.array([x0, y])):
-            points += [(x0, y), (x0 + depth, y), (x0, y)]
+            end = x0 - back
+            while end < x0 and not inside(np.array([end, y])):
+                end = min(end + 0.005, x0)
+            points += [(end, y), (x0 + depth, y), (end, y)]
     return np.asarray(points, dtype=np.float64)
 
 

@@ -72,9 +72,6 @@ class RummageParams:
         push_through_below: a lane whose felt object, once touched again or probed, the
             belief places with a confidence below this is pushed through to its far end,
             contacts ignored (once per lane; 0: never).
-        probe_before_shove: whether a lane's felt object is touched again or probed before
-            the lane is pushed through (otherwise the push goes through at once when the
-            belief is below ``push_through_below``, and the round comes after).
     """
 
     coverage: CoverageParams = dataclasses.field(
@@ -93,7 +90,6 @@ class RummageParams:
     side_margin: float = 0.01
     transit_back: float = 0.04
     push_through_below: float = 0.5
-    probe_before_shove: bool = True
 
 
 def _belief_of(belief) -> tuple[np.ndarray | None, float]:
@@ -132,8 +128,8 @@ class BeliefRummagingPolicy:
         self.in_workspace = in_workspace or (lambda xy: True)
         width = float(np.ptp(self.footprint[:, 1]))
         self.lanes = coverage_waypoints(start_xy, self.params.coverage, width,
-                                        self.in_workspace).reshape(-1, 3, 2)
-        self._set_back(self.lanes, self.params.transit_back)
+                                        self.in_workspace, self.params.transit_back,
+                                        ).reshape(-1, 3, 2)  # fmt: skip
         self.actions = self.rounds = self.touches = self.contacts = self.bumps = 0
         self.shoves = 0
         # (action, confidence) each time the belief was asked.
@@ -151,16 +147,6 @@ class BeliefRummagingPolicy:
         self._probe: FaceProbePolicy | None = None
         self._last_step, self._moving, self._last_xy = np.zeros(2), False, None
         self._next_lane()
-
-    def _set_back(self, lanes: np.ndarray, back: float) -> None:
-        """Moves the lanes' ends (their first and last waypoints) ``back`` along -x, less
-        where that would leave the workspace (5 mm steps)."""
-        for lane in lanes:
-            x = lane[0, 0] - back
-            while x < lane[0, 0] and not (self.in_workspace(np.array([x, lane[0, 1]]))
-                                          and self.in_workspace(np.array([x, lane[2, 1]]))):
-                x += 0.005
-            lane[0, 0] = lane[2, 0] = min(x, lane[0, 0])
 
     def copy(self) -> BeliefRummagingPolicy:
         """A copy whose play does not change this one (settings, shape, footprint and lanes
@@ -256,18 +242,13 @@ class BeliefRummagingPolicy:
                                self.in_workspace)
 
     def _felt(self, xy, belief) -> np.ndarray | None:
-        """A push sensed contact: stop if the target is known; else push the lane through
-        if the belief is low and ``probe_before_shove`` is off; else probe it if the belief
+        """A push sensed contact: stop if the target is known, else probe it if the belief
         places it (and rounds are left), else touch it again beside the first touch (see
         ``retouches``), else leave the lane (:meth:`_leave_lane`); first back off."""
         if self._known(belief):
             return None
         back = np.array([-self.params.back_off, 0.0])
-        shove_now = (not self.params.probe_before_shove and not self._shoved
-                     and self.confidence < self.params.push_through_below)
-        if shove_now:
-            self._leave_lane(xy)
-        elif self._may_probe():
+        if self._may_probe():
             self._probe = self._new_probe()
         elif self._retouches < self.params.retouches:
             if self._retouches == 0:
