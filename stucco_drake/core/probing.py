@@ -25,11 +25,12 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import itertools
 from collections.abc import Callable
 
 import numpy as np
 
+from stucco_drake.core.probe_choice import distinct_rivals, most_informative
+from stucco_drake.core.probe_paths import rotation_2d, travel_waypoints
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
 
@@ -61,6 +62,13 @@ class ProbeParams:
             after). A box the script turned about the corner nearest the gripper keeps that
             corner on the believed long face, where the long-face touches meet it; its short
             face is where the turn shows (``results/development/README.md``, tenth look).
+        discriminate: choose each probe where the pose hypotheses disagree on its outcome
+            (:mod:`~stucco_drake.core.probe_choice`), among the faces of the likeliest
+            ``max_rivals`` hypotheses apart from one another, while one gains at least
+            ``min_gain`` nats; then the likeliest pose's probes as without it. At most
+            ``max_probes`` probes in all.
+        rival_temperature: divides the hypotheses' cost differences when the gain is judged.
+        outcome_tolerance: approach distances counting as one outcome.
     """
 
     standoff: float = 0.02
@@ -76,6 +84,12 @@ class ProbeParams:
     long_face_offsets: tuple[float, ...] = (-0.5, 0.5)
     cylinder_angles: tuple[float, ...] = (np.pi / 4, -np.pi / 4)
     end_face_first: bool = False
+    discriminate: bool = False
+    max_rivals: int = 6
+    rival_temperature: float = 5.0
+    outcome_tolerance: float = 0.015
+    min_gain: float = 0.1
+    max_probes: int = 6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,16 +100,11 @@ class Probe:
     normal: np.ndarray
 
 
-def _rotation(yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s], [s, c]])
-
-
 def outline_box(pose, shape: BoxSdf | CylinderSdf) -> tuple[np.ndarray, np.ndarray, float]:
     """(centre (2,), half extents (2,), yaw) of the target's planar bounding box at ``pose``
     (x, y, yaw) in W; a cylinder's is the square about its circle."""
     pose = np.asarray(pose, dtype=np.float64)
-    centre = pose[:2] + _rotation(pose[2]) @ np.asarray(shape.center, dtype=np.float64)[:2]
+    centre = pose[:2] + rotation_2d(pose[2]) @ np.asarray(shape.center, dtype=np.float64)[:2]
     if isinstance(shape, BoxSdf):
         half = np.asarray(shape.half_extents, dtype=np.float64)[:2]
     elif isinstance(shape, CylinderSdf):
@@ -117,7 +126,7 @@ def plan_probes(pose, shape: BoxSdf | CylinderSdf, gripper_xy, params: ProbePara
             normal = np.array([np.cos(base + angle), np.sin(base + angle)])
             probes.append(Probe(centre + shape.radius * normal, normal))
         return probes
-    R = _rotation(yaw)
+    R = rotation_2d(yaw)
     local = R.T @ towards
     long_axis = int(np.argmax(half))
     short_axis = 1 - long_axis
@@ -134,60 +143,6 @@ def plan_probes(pose, shape: BoxSdf | CylinderSdf, gripper_xy, params: ProbePara
     end_normal[long_axis] = 1.0 if local[long_axis] >= 0 else -1.0
     end = Probe(centre + R @ (end_normal * half[long_axis]), R @ end_normal)
     return [end, *probes] if params.end_face_first else [*probes, end]
-
-
-def segment_enters_box(a, b, centre, half, yaw) -> bool:
-    """Whether the segment a-b (W) passes through the interior of the box (centre, half
-    extents, yaw), by clipping it against the box's slabs in the box's frame."""
-    R = _rotation(yaw)
-    p, d = R.T @ (np.asarray(a) - centre), R.T @ (np.asarray(b) - np.asarray(a))
-    lo, hi = 0.0, 1.0
-    for axis in range(2):
-        if abs(d[axis]) < 1e-12:
-            if abs(p[axis]) >= half[axis]:
-                return False
-            continue
-        t1, t2 = (-half[axis] - p[axis]) / d[axis], (half[axis] - p[axis]) / d[axis]
-        lo, hi = max(lo, min(t1, t2)), min(hi, max(t1, t2))
-        if lo >= hi:
-            return False
-    return hi - lo > 1e-9
-
-
-def travel_waypoints(start, goal, centre, half, yaw) -> list[np.ndarray]:
-    """Waypoints (W) from ``start`` to ``goal`` that keep out of the box (centre, half extents,
-    yaw): straight when the segment clears it, else around its corners the shorter way; from
-    a start inside or on the box, out through its nearest side first."""
-    start, goal = np.asarray(start, dtype=np.float64), np.asarray(goal, dtype=np.float64)
-    if not segment_enters_box(start, goal, centre, half, yaw):
-        return [goal]
-    R = _rotation(yaw)
-    local = R.T @ (start - centre)
-    if np.all(np.abs(local) < half + 2e-3):
-        # Inside or on the box (just backed off from it): out through the nearest side first.
-        axis = int(np.argmin(half - np.abs(local)))
-        local[axis] = np.copysign(half[axis] + 3e-3, local[axis])
-        exit_point = centre + R @ local
-        return [exit_point, *travel_waypoints(exit_point, goal, centre, half, yaw)]
-    # Corners pushed 1 mm further out, so that paths along the edges clear the box.
-    signs = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=np.float64)  # counter-clockwise
-    corners = centre + (signs * (half + 1e-3)) @ R.T
-    best, best_length = [goal], np.inf
-    for first in range(4):
-        if segment_enters_box(start, corners[first], centre, half, yaw):
-            continue
-        for direction in (1, -1):
-            path, k = [corners[first]], first
-            for _ in range(4):
-                if not segment_enters_box(path[-1], goal, centre, half, yaw):
-                    break
-                k = (k + direction) % 4
-                path.append(corners[k])
-            points = [start, *path, goal]
-            length = sum(np.linalg.norm(q - p) for p, q in itertools.pairwise(points))
-            if length < best_length:
-                best, best_length = [*path, goal], length
-    return best
 
 
 def _shorter(step: np.ndarray, length: float) -> np.ndarray:
@@ -230,6 +185,9 @@ class FaceProbePolicy:
         self.actions = 0
         self.touches = 0
         self.probes_done = 0
+        self.discriminated = 0  # probes chosen for their information gain
+        self._made: list[Probe] = []
+        self._informative = False  # whether the current probe was chosen for its gain
         self.bumps = 0
         self._probe_bumps = 0
         self._phase, self._probe, self._waypoints = "plan", None, []
@@ -259,8 +217,9 @@ class FaceProbePolicy:
         for _ in range(8):  # phase changes within one decision; a handful suffice
             if self._phase == "plan":
                 pose = pose() if callable(pose) else pose
+                hypotheses = pose if hasattr(pose, "costs") else None
                 pose = getattr(pose, "pose", pose)  # pose hypotheses: their likeliest
-                if pose is None or not self._plan(xy, pose):
+                if pose is None or not self._plan(xy, pose, hypotheses):
                     return None
             elif self._phase == "travel":
                 if in_contact and self._last_phase == "travel":
@@ -279,7 +238,7 @@ class FaceProbePolicy:
                 if step is not None:
                     return self._emit("approach", step)
             else:  # retreat
-                self.probes_done += 1
+                self._finish_probe()
                 self._probe_bumps = 0
                 self._phase = "plan"
                 return self._emit("retreat", self._probe.normal * self.params.back_off)
@@ -291,7 +250,7 @@ class FaceProbePolicy:
         self.bumps += 1
         self._probe_bumps += 1
         if self._probe_bumps > self.params.max_bumps:
-            self.probes_done += 1
+            self._finish_probe()
             self._probe_bumps = 0
         self._phase = "plan"
         direction = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
@@ -301,27 +260,79 @@ class FaceProbePolicy:
         self._last_phase = phase
         return step
 
-    def _plan(self, xy, pose) -> bool:
+    def _finish_probe(self) -> None:
+        """Counts the current probe as made (touched, passed, or given up)."""
+        self.probes_done += 1
+        self.discriminated += int(self._informative)
+        if self._probe is not None:
+            self._made.append(self._probe)
+
+    def _made_near(self, probe: Probe) -> bool:
+        """Whether a probe of nearly the same face point (2 cm, 30 degrees) was made."""
+        return any(np.linalg.norm(probe.point - made.point) < 0.02
+                   and float(probe.normal @ made.normal) > np.cos(np.radians(30.0))
+                   for made in self._made)  # fmt: skip
+
+    def _route(self, xy, pose, probe: Probe):
+        """(approach start, travel waypoints) of ``probe`` of the target at ``pose``, or None
+        when the gripper cannot make it (not direct, or out of the workspace)."""
+        p = self.params
+        # Travel ends outside the box grown by the footprint's radius; the approach
+        # starts there, along the face's normal.
+        far = probe.point + probe.normal * (self.radius + p.clearance + p.standoff)
+        centre, half, yaw = outline_box(pose, self.shape)
+        grown = half + self.radius + p.clearance
+        waypoints = travel_waypoints(xy, far, centre, grown, yaw)
+        # Leaving the box's margin first (just backed off from a face) still counts as
+        # direct: the exit is through the side the gripper is on.
+        local = rotation_2d(yaw).T @ (xy - centre)
+        exits = int(np.all(np.abs(local) < grown + 2e-3))
+        direct = len(waypoints) <= 1 + exits or not p.direct_only
+        if direct and all(self.in_workspace(w) for w in waypoints):
+            return far, waypoints
+        return None
+
+    def _plan_informative(self, xy, pose, hypotheses) -> bool:
+        """Sets up the probe the hypotheses disagree on most (``discriminate``); False when
+        none gains ``min_gain``."""
+        p = self.params
+        if hypotheses is None or len(hypotheses.poses) < 2 or self.probes_done >= p.max_probes:
+            return False
+        rivals = distinct_rivals(hypotheses.poses, hypotheses.costs, p.max_rivals)
+        poses = np.asarray(hypotheses.poses)[rivals]
+        candidates, sources = [], []
+        for source in (pose, *poses):
+            for probe in plan_probes(source, self.shape, xy, p):
+                if not self._made_near(probe):
+                    candidates.append(probe)
+                    sources.append(source)
+        source_of = {id(probe): source for probe, source in zip(candidates, sources, strict=True)}
+        best = most_informative(
+            candidates, lambda probe: self._route(xy, source_of[id(probe)], probe), poses,
+            np.asarray(hypotheses.costs)[rivals], self.shape, self.footprint,
+            temperature=p.rival_temperature, tolerance=p.outcome_tolerance,
+            overshoot=p.overshoot, start=xy)  # fmt: skip
+        if best is None or best[0] < p.min_gain:
+            return False
+        self._probe, self._waypoints, self._phase = best[1], best[2], "travel"
+        self._informative = True
+        return True
+
+    def _plan(self, xy, pose, hypotheses=None) -> bool:
         """Sets up the next probe that can be made; False when none is left."""
         p = self.params
+        if p.discriminate and self._plan_informative(xy, pose, hypotheses):
+            return True
+        self._informative = False
         while True:
             probes = plan_probes(pose, self.shape, xy, p)
-            if self.probes_done >= len(probes):
+            index = self.probes_done - self.discriminated
+            if index >= len(probes) or (p.discriminate and self.probes_done >= p.max_probes):
                 return False
-            probe = probes[self.probes_done]
-            # Travel ends outside the box grown by the footprint's radius; the approach
-            # starts there, along the face's normal.
-            far = probe.point + probe.normal * (self.radius + p.clearance + p.standoff)
-            centre, half, yaw = outline_box(pose, self.shape)
-            grown = half + self.radius + p.clearance
-            waypoints = travel_waypoints(xy, far, centre, grown, yaw)
-            # Leaving the box's margin first (just backed off from a face) still counts as
-            # direct: the exit is through the side the gripper is on.
-            local = _rotation(yaw).T @ (xy - centre)
-            exits = int(np.all(np.abs(local) < grown + 2e-3))
-            direct = len(waypoints) <= 1 + exits or not p.direct_only
-            if direct and all(self.in_workspace(w) for w in waypoints):
-                self._probe, self._waypoints, self._phase = probe, waypoints, "travel"
+            probe = probes[index]
+            route = self._route(xy, pose, probe)
+            if route is not None:
+                self._probe, self._waypoints, self._phase = probe, route[1], "travel"
                 return True
             self.probes_done += 1
 
@@ -331,7 +342,7 @@ class FaceProbePolicy:
         if self._last_phase == "travel" and self._last_xy is not None:
             moved = float(np.linalg.norm(xy - self._last_xy))
             if moved < 0.2 * float(np.linalg.norm(self._last_step)):
-                self.probes_done += 1
+                self._finish_probe()
                 self._phase = "plan"
                 self._last_phase = ""
                 return None

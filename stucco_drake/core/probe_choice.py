@@ -1,0 +1,186 @@
+"""Which probe tells the target's pose hypotheses apart: the touch whose outcome they disagree on.
+
+A probe planned on the likeliest pose alone confirms it: if clutter stands where that pose puts
+a face, the touch lands there and counts for it. A probe is informative when the hypotheses
+predict different outcomes for it. Here each hypothesis predicts one outcome of a guarded
+approach (:class:`~stucco_drake.core.probing.FaceProbePolicy`): how far along the approach the
+gripper's footprint first meets the target posed there, or that the gripper bumps it on the
+way to the stand-off point, or that it never meets it (the approach passes through where the
+hypothesis is not). Outcomes within ``tolerance`` of each other count as one. The outcome is
+a deterministic function of the hypothesis, so a probe's expected information gain about the
+hypotheses is the entropy of its outcome's distribution under their weights; the probe of
+most gain is made. A probe that passes through where a hypothesis puts the target and senses
+nothing is the strongest evidence there is: free space (:mod:`~.free_space`) then rules that
+pose out.
+
+The estimator's weights are sharp (cost differences of a few units decide) while its model of
+the contacts is rough, so the gain is judged on weights tempered by ``temperature``: a rival a
+few units behind still gets probed. Everything is planar: points (x, y) in the world frame W
+(m), yaw about world z (rad).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from scipy.spatial import ConvexHull
+
+from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline
+
+#: Outcome of a hypothesis under which the gripper meets the target before the approach.
+BUMP = -1.0
+
+
+def footprint_outline(footprint, spacing: float = 0.003) -> tuple[np.ndarray, np.ndarray]:
+    """The gripper's planar footprint (m, 2) as its convex hull: points along the hull's
+    boundary every ``spacing`` (m) and the hull's half-planes ((h, 3): a x + b y + c <= 0
+    inside)."""
+    footprint = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
+    hull = ConvexHull(footprint)
+    corners = footprint[hull.vertices]
+    return _along(np.concatenate([corners, corners[:1]]), spacing)[:-1], hull.equations
+
+
+def _along(points, spacing: float) -> np.ndarray:
+    """(q, 2) the polyline through ``points`` (k, 2) sampled every ``spacing`` (m) or less,
+    its vertices and both ends included."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    samples = []
+    for a, b in itertools.pairwise(points):
+        n = max(1, int(np.ceil(np.linalg.norm(b - a) / spacing)))
+        samples.append(a + np.linspace(0.0, 1.0, n, endpoint=False)[:, None] * (b - a))
+    return np.concatenate([*samples, points[-1:]])
+
+
+def footprint_meets(positions, outline, half_planes, poses, shape) -> np.ndarray:
+    """(P, S) whether the footprint at each of ``positions`` (S, 2) overlaps the target's
+    cross-section posed at each of ``poses`` (P, 3): a boundary point of the footprint inside
+    the target, or a point of the target's outline inside the footprint."""
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    distance = cross_section_sdf(shape)
+    # The footprint's boundary in each target frame: (P, S, m, 2).
+    posed = positions[:, None, :] + outline[None, :, :]
+    local = np.einsum("psmi,pij->psmj", posed[None] - poses[:, None, None, :2],
+                      rotations(poses[:, 2]))  # fmt: skip
+    inside = distance(local.reshape(len(poses), -1, 2)).reshape(local.shape[:3]) < 0.0
+    meets = inside.any(axis=2)
+    # The target's outline in the footprint's frame: (P, S, k, 2).
+    target = sample_outline(shape, 0.005)
+    world = np.einsum("kj,pij->pki", target, rotations(poses[:, 2])) + poses[:, None, :2]
+    rel = world[:, None, :, :] - positions[None, :, None, :]
+    within = np.all(rel @ half_planes[:, :2].T + half_planes[:, 2] <= 0.0, axis=-1)
+    return meets | within.any(axis=2)
+
+
+def probe_outcomes(path, approach_start, normal, travel: float, poses, shape, outline,
+                   half_planes, spacing: float = 0.0025) -> np.ndarray:  # fmt: skip
+    """(P,) each posed hypothesis's outcome of one probe: :data:`BUMP` when the footprint meets
+    it on the ``path`` ((q, 2) W, sampled travel to the stand-off point), else the distance (m)
+    along the approach (from ``approach_start`` along ``-normal``, ``travel`` long) at which it
+    first meets it, inf when it never does."""
+    steps = np.arange(0.0, travel + 1e-9, spacing)
+    approach = np.asarray(approach_start)[None] - steps[:, None] * np.asarray(normal)[None]
+    outcomes = np.full(len(poses), np.inf)
+    if len(path):
+        bumped = footprint_meets(path, outline, half_planes, poses, shape).any(axis=1)
+    else:
+        bumped = np.zeros(len(poses), dtype=bool)
+    met = footprint_meets(approach, outline, half_planes, poses, shape)
+    first = np.argmax(met, axis=1)
+    hit = met.any(axis=1)
+    outcomes[hit] = steps[first[hit]]
+    outcomes[bumped] = BUMP
+    return outcomes
+
+
+def outcome_entropy(outcomes, weights, tolerance: float) -> float:
+    """Entropy (nats) of the outcome under the hypotheses' ``weights``, outcomes within
+    ``tolerance`` (m) of their neighbour in sorted order counting as one (a bump and no
+    contact each one outcome): the probe's expected information gain."""
+    outcomes = np.asarray(outcomes, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64) / np.sum(weights)
+    order = np.argsort(outcomes, kind="stable")
+    sorted_outcomes = outcomes[order]
+    finite = np.isfinite(sorted_outcomes) & (sorted_outcomes != BUMP)
+    # A new group wherever the outcome jumps by more than the tolerance, or its kind changes.
+    jumps = np.ones(len(order), dtype=bool)
+    jumps[1:] = ~(finite[1:] & finite[:-1]
+                  & (np.diff(np.where(finite, sorted_outcomes, 0.0)) <= tolerance))
+    jumps[1:] &= ~(~finite[1:] & ~finite[:-1]
+                   & (sorted_outcomes[1:] == sorted_outcomes[:-1]))
+    group = np.cumsum(jumps) - 1
+    mass = np.bincount(group, weights=weights[order])
+    mass = mass[mass > 0]
+    return float(-(mass * np.log(mass)).sum())
+
+
+def tempered_weights(costs, temperature: float) -> np.ndarray:
+    """Weights ``exp(-(cost - min) / temperature)``, normalised."""
+    costs = np.asarray(costs, dtype=np.float64)
+    weights = np.exp(-(costs - costs.min()) / temperature)
+    return weights / weights.sum()
+
+
+
+
+def most_informative(candidates, route, poses, costs, shape, footprint, *,
+                     temperature: float, tolerance: float, overshoot: float,
+                     start) -> tuple[float, object, list] | None:  # fmt: skip
+    """The candidate probe of most expected information gain about the hypotheses (``poses``
+    (P, 3) W with ``costs`` (P,), tempered by ``temperature``) and its travel, as (gain,
+    probe, waypoints); None when no candidate can be made.
+
+    Args:
+        candidates: probes (with ``point`` and outward ``normal`` (2,) W) in order of
+            preference (the first of equal gains is taken).
+        route: a probe's (approach start, travel waypoints ending there), or None when the
+            gripper cannot make it.
+        shape: the target's geometry; footprint: (m, 2) the gripper's about its origin (W axes).
+        tolerance: approach distances (m) counting as one outcome.
+        overshoot: how far (m) past the probed face the approach goes.
+        start: (2,) where the gripper is (W).
+    """
+    outline, half_planes = footprint_outline(footprint)
+    weights = tempered_weights(costs, temperature)
+    best = None
+    for probe in candidates:
+        planned = route(probe)
+        if planned is None:
+            continue
+        far, waypoints = planned
+        # The travel's first centimetre is where the gripper backs off from a touch: a pose a
+        # few millimetres off the touched face would count as bumped there.
+        path = _along([start, *waypoints], 0.005)
+        path = path[np.linalg.norm(path - start, axis=1) >= 0.01]
+        support = float(np.max(np.asarray(footprint) @ -np.asarray(probe.normal)))
+        travel = float((far - probe.point) @ probe.normal) - support + overshoot
+        outcomes = probe_outcomes(path, far, probe.normal, travel, poses, shape, outline,
+                                  half_planes)  # fmt: skip
+        gain = outcome_entropy(outcomes, weights, tolerance)
+        if best is None or gain > best[0] + 1e-9:
+            best = (gain, probe, waypoints)
+    return best
+
+
+
+def distinct_rivals(poses, costs, count: int, distance: float = 0.02,
+                    angle: float = np.radians(15.0)) -> np.ndarray:  # fmt: skip
+    """Indices of up to ``count`` hypotheses, cheapest first, each at least ``distance`` (m)
+    or ``angle`` (rad, modulo a half turn) from every cheaper one taken: variants of one pose
+    tell nothing apart."""
+    poses = np.asarray(poses, dtype=np.float64)
+    taken: list[int] = []
+    for k in np.argsort(np.asarray(costs), kind="stable"):
+        turn = np.abs((poses[taken, 2] - poses[k, 2] + np.pi / 2) % np.pi - np.pi / 2)
+        near = (np.hypot(*(poses[taken, :2] - poses[k, :2]).T) < distance) & (turn < angle)
+        if not near.any():
+            taken.append(int(k))
+            if len(taken) == count:
+                break
+    return np.array(taken, dtype=int)
+
+
+__all__ = ["BUMP", "distinct_rivals", "footprint_meets", "footprint_outline", "most_informative",
+           "outcome_entropy", "probe_outcomes", "tempered_weights"]

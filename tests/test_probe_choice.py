@@ -1,0 +1,107 @@
+"""Choosing the probe the pose hypotheses disagree on (core/probe_choice.py), against geometry
+done by hand: where a square footprint first meets a box on a straight approach, the entropy of
+outcomes of known weights, and a policy that, of two rival poses, probes where they differ."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from stucco_drake.core.probe_choice import (
+    BUMP,
+    distinct_rivals,
+    footprint_meets,
+    footprint_outline,
+    outcome_entropy,
+    probe_outcomes,
+)
+from stucco_drake.core.probing import FaceProbePolicy, ProbeParams
+from stucco_drake.core.shapes import BoxSdf
+
+# A box 6 cm by 15.8 cm in plan (m), and a square gripper footprint 8 cm on a side.
+BOX = BoxSdf(half_extents=(0.03, 0.079, 0.105))
+FOOTPRINT = np.array([[sx * 0.04, sy * 0.04] for sx in (-1, 1) for sy in (-1, 1)])
+
+
+def test_the_footprint_meets_the_box_exactly_when_their_rectangles_overlap():
+    """Box at the origin, unturned: x in [-0.03, 0.03]. The footprint centred at x spans
+    [x - 0.04, x + 0.04]: it meets the box for x < 0.07 (1 mm either side of that, by hand),
+    and a footprint that swallows a corner of a turned box meets it too."""
+    outline, planes = footprint_outline(FOOTPRINT, spacing=0.002)
+    pose = np.array([[0.0, 0.0, 0.0]])
+    meets = footprint_meets([[0.069, 0.0], [0.071, 0.0], [0.0, 0.118], [0.0, 0.12]], outline,
+                            planes, pose, BOX)  # fmt: skip
+    assert meets.tolist() == [[True, False, True, False]]
+    # Small box entirely inside the footprint: no footprint boundary point is inside it, but
+    # its outline is inside the footprint.
+    small = BoxSdf(half_extents=(0.01, 0.01, 0.01))
+    assert footprint_meets([[0.0, 0.0]], outline, planes, [[0.005, 0.0, 0.3]], small)[0, 0]
+
+
+def test_each_hypothesis_predicts_where_the_approach_first_touches_it():
+    """The footprint approaches along +x from x = -0.2 (normal (-1, 0)), 0.3 m of travel.
+    A box at x = 0 is met when the footprint's leading edge reaches x = -0.03: after
+    0.2 - 0.04 - 0.03 = 0.13 m (the first 2.5 mm sample past touching); a box 0.2 m to the
+    side is never met; one on the travel path is bumped."""
+    outline, planes = footprint_outline(FOOTPRINT)
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.2, 0.0], [-0.3, -0.2, 0.0]])
+    path = np.column_stack([np.full(20, -0.3), np.linspace(-0.4, 0.0, 20)])
+    outcomes = probe_outcomes(path, np.array([-0.2, 0.0]), np.array([-1.0, 0.0]), 0.3, poses,
+                              BOX, outline, planes)  # fmt: skip
+    assert 0.13 < outcomes[0] <= 0.13 + 0.0025 + 1e-9
+    assert outcomes[1] == np.inf
+    assert outcomes[2] == BUMP
+
+
+def test_outcome_entropy_counts_outcomes_within_the_tolerance_as_one():
+    half = np.array([0.5, 0.5])
+    assert outcome_entropy([0.01, 0.05], half, 0.015) == pytest.approx(np.log(2))
+    assert outcome_entropy([0.01, 0.02], half, 0.015) == pytest.approx(0.0)
+    assert outcome_entropy([np.inf, np.inf], half, 0.015) == pytest.approx(0.0)
+    assert outcome_entropy([BUMP, np.inf], half, 0.015) == pytest.approx(np.log(2))
+    # Three groups of weights 0.25, 0.25, 0.5: -(2 * 0.25 ln 0.25 + 0.5 ln 0.5) = 1.5 ln 2.
+    weights = np.array([0.25, 0.25, 0.25, 0.25])
+    assert outcome_entropy([BUMP, 0.03, np.inf, np.inf], weights, 0.015) == pytest.approx(
+        1.5 * np.log(2))  # fmt: skip
+
+
+def test_rivals_skip_variants_of_a_pose_taken_already():
+    poses = np.array([[0.0, 0.0, 0.0], [0.005, 0.0, np.pi], [0.1, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    costs = np.array([0.0, 1.0, 2.0, 3.0])
+    # The second is the first turned by a half turn, 5 mm away: the same box.
+    assert distinct_rivals(poses, costs, 6).tolist() == [0, 2, 3]
+    assert distinct_rivals(poses, costs, 2).tolist() == [0, 2]
+
+
+@dataclasses.dataclass
+class Hypotheses:
+    poses: np.ndarray
+    costs: np.ndarray
+    pose: np.ndarray
+
+
+def test_of_two_rival_poses_the_policy_probes_where_they_differ():
+    """The likelier pose (cost 0) has the box's long axis along x (x in [0.121, 0.279], y in
+    [-0.03, 0.03]), its rival (cost 2) along y (x in [0.14, 0.2], y in [-0.03, 0.128]): their
+    lower faces are in line. The gripper is below both. Without discrimination the first
+    probe is the likelier pose's lower face at x = 0.1605, where the rival is met at the same
+    distance: it tells nothing. With it, the first probe's outcomes differ under the two (one
+    met, the other not, or met 1.5 cm or more apart)."""
+    likely = np.array([0.2, 0.0, np.pi / 2])
+    rival = np.array([0.17, 0.049, 0.0])
+    hypotheses = Hypotheses(np.array([likely, rival]), np.array([0.0, 2.0]), likely)
+    start = np.array([0.2, -0.3])
+    outline, planes = footprint_outline(FOOTPRINT)
+    for discriminate in (False, True):
+        params = ProbeParams(discriminate=discriminate, direct_only=False)
+        policy = FaceProbePolicy(BOX, FOOTPRINT, max_step=0.03, params=params)
+        assert policy.next_step(start, False, hypotheses) is not None
+        probe = policy._probe
+        far = policy._waypoints[-1]
+        support = float(np.max(FOOTPRINT @ -probe.normal))
+        travel = float((far - probe.point) @ probe.normal) - support + params.overshoot
+        outcomes = probe_outcomes(np.zeros((0, 2)), far, probe.normal, travel,
+                                  hypotheses.poses, BOX, outline, planes)  # fmt: skip
+        differ = (np.isfinite(outcomes).sum() == 1
+                  or abs(outcomes[0] - outcomes[1]) >= params.outcome_tolerance)
+        assert differ == discriminate, (discriminate, outcomes)
