@@ -162,6 +162,22 @@ def test_the_policy_backs_off_probes_and_stops_once_confident():
     assert touches_are_guarded(positions, contacts, pose)
 
 
+def test_checked_after_each_probe_the_policy_stops_at_the_touch_that_bears_it_out():
+    """The previous test's box and belief, asked after every probe: the policy stops at the
+    first probe that touches the box (its last step is that touch, no retreat after it),
+    sooner than when it waits for the round's end."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    whole = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                  RummageParams(coverage=BAND_NEAREST))
+    _positions, whole_steps, _ = play(whole, pose, Belief(pose, needed=2))
+    each = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                 RummageParams(coverage=BAND_NEAREST, check_each_probe=True))
+    positions, steps, contacts = play(each, pose, Belief(pose, needed=2))
+    assert contacts[-1] and each.touches == 1 and each.rounds == 1
+    assert each.confidence == pytest.approx(0.9999) and len(steps) < len(whole_steps)
+    assert touches_are_guarded(positions, contacts, pose)
+
+
 def test_a_lane_through_the_believed_target_is_pushed_guarded():
     """Never confident, one probe round: the policy explores on, and the next lane (y 0.19),
     straight through the believed box, is pushed until it touches the box's near end and

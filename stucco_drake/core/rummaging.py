@@ -72,6 +72,9 @@ class RummageParams:
         push_through_below: a lane whose felt object, once touched again or probed, the
             belief places with a confidence below this is pushed through to its far end,
             contacts ignored (once per lane; 0: never).
+        check_each_probe: ask the belief after each probe of a round that touched the
+            target (any probe without ``verified_stop``), not only once the round is over,
+            and stop there once it passes ``stop_confidence``.
     """
 
     coverage: CoverageParams = dataclasses.field(
@@ -90,6 +93,7 @@ class RummageParams:
     side_margin: float = 0.01
     transit_back: float = 0.04
     push_through_below: float = 0.5
+    check_each_probe: bool = False
 
 
 def _belief_of(belief) -> tuple[np.ndarray | None, float]:
@@ -137,7 +141,7 @@ class BeliefRummagingPolicy:
         self._lane_rounds = 0
         self._skipped: set[int] = set()
         self._shoved = False
-        self._verified = False
+        self._verified = self._stopping = False
         self.confidence, self.pose = 0.0, None
         self._lane, self._lane_bumps, self._retouches = -1, 0, 0
         self._touch_y, self._contact_xy = 0.0, None
@@ -196,17 +200,37 @@ class BeliefRummagingPolicy:
         return (self.pose is not None and self.rounds < p.max_rounds
                 and self._lane_rounds < p.lane_rounds)
 
+    def _end_round(self) -> None:
+        """Counts the probe round under way as done."""
+        self.touches += self._probe.touches
+        self._verified = self._probe.touches > 0
+        self.bumps += self._probe.bumps
+        self.rounds += 1
+        self._lane_rounds += 1
+        self._probe = None
+
+    def _probe_step(self, xy, in_contact: bool, belief):
+        """The probe round's next step, or None when the round is over or, with
+        ``check_each_probe``, a probe that touched the target left it known (then the
+        policy stops)."""
+        made, touched = self._probe.probes_done, self._probe.touches
+        step = self._probe.next_step(xy, in_contact, belief)
+        if step is None or not self.params.check_each_probe or self._probe.probes_done == made:
+            return step
+        if self._probe.touches == touched and self.params.verified_stop:
+            return step
+        if self._believe(belief) >= self.params.stop_confidence:
+            self._end_round()
+            self._stopping = True
+            return None
+        return step
+
     def _decide(self, xy, in_contact: bool, belief):
         if self._probe is not None:
-            step = self._probe.next_step(xy, in_contact, belief)
-            if step is not None:
+            step = self._probe_step(xy, in_contact, belief)
+            if step is not None or self._stopping:
                 return step
-            self.touches += self._probe.touches
-            self._verified = self._probe.touches > 0
-            self.bumps += self._probe.bumps
-            self.rounds += 1
-            self._lane_rounds += 1
-            self._probe = None
+            self._end_round()
             if self._known(belief):
                 return None
             self._leave_lane(xy)
