@@ -16,6 +16,7 @@ from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput, MatrixGain
+from test_scene import TABLE
 
 from stucco_drake.robot.models import bubble_bodies, iiwa_observed_robot_arguments
 from stucco_drake.scenes import build_scene, load_scene_text
@@ -36,15 +37,6 @@ SETTLE_STEPS = 50  # 0.1 s at 2 ms: five observer time constants
 MAX_PATCHES = 4  # patch centroids kept per step by the truth system
 CONTACT_FORCE = 1.0  # N: a true contact step for the per-action labels
 MIN_CONTACT_STEPS = 5  # 10 ms of such steps make an action a true contact action
-
-_TABLE = """directives:
-- add_model:
-    name: table
-    file: package://stucco_drake_models/table.sdf
-- add_weld:
-    parent: world
-    child: table::base_link
-"""
 
 # The gripper starts at (0.15, 0) with its closing axis along world y, so its sides (finger
 # plates' faces, gripper y) face world +-x and the plates' outer faces world +-y.
@@ -81,7 +73,7 @@ def scene_text(objects: str, actions, finger: float) -> str:
         f"  finger_position: {finger}\naction_duration: 0.5\n"
         f"plant:\n  time_step: 0.002\n  discrete_contact_approximation: sap\n"
         f"  contact_model: hydroelastic_with_fallback\n  use_sampled_output_ports: false\n"
-        f"{_TABLE}{objects}actions:\n{steps}"
+        f"{TABLE}{objects}actions:\n{steps}"
     )
 
 
