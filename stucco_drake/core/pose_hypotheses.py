@@ -363,6 +363,13 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
     return poses, costs, explained
 
 
+def cost_weights(costs, temperature: float) -> np.ndarray:
+    """(k,) weights ``exp(-(cost - min cost) / temperature)`` of ``costs`` (k,), normalised."""
+    costs = np.asarray(costs, dtype=np.float64)
+    weights = np.exp(-(costs - costs.min()) / temperature)
+    return weights / weights.sum()
+
+
 def weigh_hypotheses(poses, costs, explained, shape: BoxSdf | CylinderSdf,
                      params: HypothesisParams, motion_scales=None) -> PoseHypotheses:  # fmt: skip
     """The :class:`PoseHypotheses` of scored poses ((k, 3), costs (k,), explained (k, n)):
@@ -376,8 +383,7 @@ def weigh_hypotheses(poses, costs, explained, shape: BoxSdf | CylinderSdf,
     keep |= costs == costs.min()
     order = np.flatnonzero(keep)[np.argsort(costs[keep], kind="stable")]
     poses, costs, explained = poses[order].copy(), costs[order], explained[order]
-    weights = np.exp(-(costs - costs[0]) / params.temperature)
-    weights /= weights.sum()
+    weights = cost_weights(costs, params.temperature)
     # One grasp is made: where it closes on the target under the most weight (the cheapest
     # among equals). Its probability of closing on the target is the confidence.
     choice = choose_grasp(poses, weights, shape, margin=params.grasp_margin,

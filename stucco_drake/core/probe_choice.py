@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline
+from stucco_drake.core.pose_hypotheses import cost_weights
 
 #: Outcome of a hypothesis under which the gripper meets the target before the approach.
 BUMP = -1.0
@@ -116,40 +117,26 @@ def outcome_entropy(outcomes, weights, tolerance: float) -> float:
     return float(-(mass * np.log(mass)).sum())
 
 
-def tempered_weights(costs, temperature: float) -> np.ndarray:
-    """Weights ``exp(-(cost - min) / temperature)``, normalised."""
-    costs = np.asarray(costs, dtype=np.float64)
-    weights = np.exp(-(costs - costs.min()) / temperature)
-    return weights / weights.sum()
-
-
-
-
-def most_informative(candidates, route, poses, costs, shape, footprint, *,
+def most_informative(candidates, poses, costs, shape, footprint, *,
                      temperature: float, tolerance: float, overshoot: float,
                      start) -> tuple[float, object, list] | None:  # fmt: skip
     """The candidate probe of most expected information gain about the hypotheses (``poses``
     (P, 3) W with ``costs`` (P,), tempered by ``temperature``) and its travel, as (gain,
-    probe, waypoints); None when no candidate can be made.
+    probe, waypoints); None without candidates.
 
     Args:
-        candidates: probes (with ``point`` and outward ``normal`` (2,) W) in order of
-            preference (the first of equal gains is taken).
-        route: a probe's (approach start, travel waypoints ending there), or None when the
-            gripper cannot make it.
+        candidates: (probe, approach start (2,), travel waypoints ending there) of each probe
+            the gripper can make (``probe.point`` and outward ``probe.normal`` (2,) W), in
+            order of preference (the first of equal gains is taken).
         shape: the target's geometry; footprint: (m, 2) the gripper's about its origin (W axes).
         tolerance: approach distances (m) counting as one outcome.
         overshoot: how far (m) past the probed face the approach goes.
         start: (2,) where the gripper is (W).
     """
     outline, half_planes = footprint_outline(footprint)
-    weights = tempered_weights(costs, temperature)
+    weights = cost_weights(costs, temperature)
     best = None
-    for probe in candidates:
-        planned = route(probe)
-        if planned is None:
-            continue
-        far, waypoints = planned
+    for probe, far, waypoints in candidates:
         # The travel's first centimetre is where the gripper backs off from a touch: a pose a
         # few millimetres off the touched face would count as bumped there.
         path = _along([start, *waypoints], 0.005)
@@ -183,4 +170,4 @@ def distinct_rivals(poses, costs, count: int, distance: float = 0.02,
 
 
 __all__ = ["BUMP", "distinct_rivals", "footprint_meets", "footprint_outline", "most_informative",
-           "outcome_entropy", "probe_outcomes", "tempered_weights"]
+           "outcome_entropy", "probe_outcomes"]

@@ -300,18 +300,16 @@ class FaceProbePolicy:
             return False
         rivals = distinct_rivals(hypotheses.poses, hypotheses.costs, p.max_rivals)
         poses = np.asarray(hypotheses.poses)[rivals]
-        candidates, sources = [], []
+        candidates = []
         for source in (pose, *poses):
             for probe in plan_probes(source, self.shape, xy, p):
-                if not self._made_near(probe):
-                    candidates.append(probe)
-                    sources.append(source)
-        source_of = {id(probe): source for probe, source in zip(candidates, sources, strict=True)}
-        best = most_informative(
-            candidates, lambda probe: self._route(xy, source_of[id(probe)], probe), poses,
-            np.asarray(hypotheses.costs)[rivals], self.shape, self.footprint,
-            temperature=p.rival_temperature, tolerance=p.outcome_tolerance,
-            overshoot=p.overshoot, start=xy)  # fmt: skip
+                route = None if self._made_near(probe) else self._route(xy, source, probe)
+                if route is not None:
+                    candidates.append((probe, *route))
+        best = most_informative(candidates, poses, np.asarray(hypotheses.costs)[rivals],
+                                self.shape, self.footprint, temperature=p.rival_temperature,
+                                tolerance=p.outcome_tolerance, overshoot=p.overshoot,
+                                start=xy)  # fmt: skip
         if best is None or best[0] < p.min_gain:
             return False
         self._probe, self._waypoints, self._phase = best[1], best[2], "travel"
