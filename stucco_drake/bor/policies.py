@@ -1,7 +1,7 @@
 """What chooses the BOR Diagram's actions besides a scene's prescribed script.
 
 - :class:`~stucco_drake.core.probing.ProbeParams`: the prescribed actions, then guarded probes
-  of the target's likeliest pose (``--policy probe``).
+  where the target's pose hypotheses disagree, then of its likeliest pose (``--policy probe``).
 - :class:`~stucco_drake.core.rummaging.RummageParams`: rummaging chosen from the belief from
   the first action, stopping once the target is known (``--policy belief``).
 - :class:`~stucco_drake.core.coverage.CoverageParams`: no policy, the non-adaptive baseline:

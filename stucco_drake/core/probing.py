@@ -10,10 +10,12 @@ that finds the face elsewhere corrects the next one. A contact while travelling 
 where it was not believed to be, or clutter) is backed off from at once and the probe planned
 again, so that the gripper does not drag what it bumped.
 
-Which faces: a box's long face nearest the gripper at two points (its yaw and one coordinate),
-then the nearer short face at its centre (the other coordinate; or that first,
-``end_face_first``); a cylinder from the two
-directions 45 degrees either side of the gripper's. Probes whose stand-off point lies outside
+Which faces: first (``discriminate``, the default) those where the distinct likeliest
+hypotheses predict different outcomes, the most informative first
+(:mod:`~stucco_drake.core.probe_choice`); then a box's long face nearest the gripper at two
+points (its yaw and one coordinate), then the nearer short face at its centre (the other
+coordinate; or that first, ``end_face_first``); a cylinder from the two directions 45 degrees
+either side of the gripper's. Probes whose stand-off point lies outside
 the workspace, or (by default) that the gripper cannot reach in a straight line clear of the
 hypothesised target, are skipped.
 
@@ -66,7 +68,10 @@ class ProbeParams:
             (:mod:`~stucco_drake.core.probe_choice`), among the faces of the likeliest
             ``max_rivals`` hypotheses apart from one another, while one gains at least
             ``min_gain`` nats; then the likeliest pose's probes as without it. At most
-            ``max_probes`` probes in all.
+            ``max_probes`` probes in all. On by default since the development layouts'
+            thirteenth look (``results/development/README.md``); off: the likeliest pose's
+            probes in a fixed order, as every probe-policy folder before
+            ``results/report_layouts_3/`` was made.
         rival_temperature: divides the hypotheses' cost differences when the gain is judged.
         outcome_tolerance: approach distances counting as one outcome.
     """
@@ -84,7 +89,7 @@ class ProbeParams:
     long_face_offsets: tuple[float, ...] = (-0.5, 0.5)
     cylinder_angles: tuple[float, ...] = (np.pi / 4, -np.pi / 4)
     end_face_first: bool = False
-    discriminate: bool = False
+    discriminate: bool = True
     max_rivals: int = 6
     rival_temperature: float = 5.0
     outcome_tolerance: float = 0.015

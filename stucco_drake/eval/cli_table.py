@@ -305,8 +305,9 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
                             "selection of results/table_ii)")
     table.add_argument("--policy", choices=("prescribed", *policies), default="prescribed",
                        help="what chooses the actions: the scene's prescribed list (default)"
-                            + (", or after it 'probe': guarded touches of the likeliest target"
-                               " pose of STUCCO's live hypotheses" if "probe" in policies
+                            + (", or after it 'probe': guarded touches where STUCCO's live "
+                               "pose hypotheses disagree, then of the likeliest pose"
+                               if "probe" in policies
                                else ""))
     table.add_argument("--policy-params", metavar="SETTINGS.yaml", default=None,
                        help="the policy's settings as YAML overrides of its defaults (nested "
