@@ -136,6 +136,27 @@ def test_with_nothing_felt_the_policy_plays_the_whole_sweep():
     assert belief.asked == 0
 
 
+def test_actions_are_tallied_by_what_they_were_for():
+    """Nothing on the table: every step along +x is a lane's push, every other step travel,
+    and the tally says so. With the box of the next test: the step after the first touch is
+    a back-off, and the probe round's steps are the rest after the lane's travel and push."""
+    params = RummageParams(coverage=BAND_NEAREST, max_actions=400, transit_back=0.0)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    _positions, steps, _ = play(policy, None, Belief(None, 1))
+    forward = int(np.sum((steps[:, 0] > 0) & (np.abs(steps[:, 1]) < 1e-12)))
+    assert policy.action_kinds == {"push": forward, "travel": len(steps) - forward}
+
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                   RummageParams(coverage=BAND_NEAREST))
+    _positions, steps, contacts = play(policy, pose, Belief(pose, needed=2))
+    first = int(np.argmax(contacts))
+    kinds = policy.action_kinds
+    assert sum(kinds.values()) == len(steps) and kinds["back_off"] == 1
+    assert kinds["push"] + kinds.get("travel", 0) == first + 1
+    assert kinds["probe"] == len(steps) - first - 2 > 0
+
+
 def touches_are_guarded(positions, contacts, pose) -> bool:
     """Every position where contact was sensed lies within one guarded-move increment (1/30 of
     a step of at most 3 cm) outside the box: the gripper never pressed into it."""

@@ -95,4 +95,5 @@ def policy_info(policy: RummagingPolicy, context, prescribed: int) -> dict:
     return {"name": "belief", "actions": core.actions, "rounds": core.rounds,
             "touches": core.touches, "contacts": core.contacts, "bumps": core.bumps,
             "shoves": core.shoves, "confidence": core.confidence,
+            "action_kinds": dict(sorted(core.action_kinds.items())),
             "confidence_trace": [[int(k), float(c)] for k, c in core.trace]}

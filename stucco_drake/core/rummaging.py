@@ -138,6 +138,11 @@ class BeliefRummagingPolicy:
         self.shoves = 0
         # (action, confidence) each time the belief was asked.
         self.trace: list[tuple[int, float]] = []
+        # Actions by what they were for: "push" (a lane's or a touch beside's, guarded),
+        # "shove" (pushed through), "travel", "back_off" (from a push's or a travel's
+        # contact) and "probe" (a probe round's, its travel included).
+        self.action_kinds: dict[str, int] = {}
+        self._kind = "travel"
         self._lane_rounds = 0
         self._skipped: set[int] = set()
         self._shoved = False
@@ -159,6 +164,7 @@ class BeliefRummagingPolicy:
         other._queue = list(self._queue)
         other._skipped = set(self._skipped)
         other.trace = list(self.trace)
+        other.action_kinds = dict(self.action_kinds)
         other._probe = None if self._probe is None else self._probe.copy()
         return other
 
@@ -173,6 +179,7 @@ class BeliefRummagingPolicy:
             self._stopped = True  # for good
             return None
         self.actions += 1
+        self.action_kinds[self._kind] = self.action_kinds.get(self._kind, 0) + 1
         self._last_step = np.clip(step, -self.max_step, self.max_step)
         return self._last_step
 
@@ -215,6 +222,7 @@ class BeliefRummagingPolicy:
         policy stops)."""
         made, touched = self._probe.probes_done, self._probe.touches
         step = self._probe.next_step(xy, in_contact, belief)
+        self._kind = "probe"
         if step is None or not self.params.check_each_probe or self._probe.probes_done == made:
             return step
         if self._probe.touches == touched and self.params.verified_stop:
@@ -248,6 +256,7 @@ class BeliefRummagingPolicy:
                 self._skip_beyond(xy)
                 self._next_lane()
             back = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
+            self._kind = "back_off"
             return -back * self.params.back_off
         return self._follow(xy, belief)
 
@@ -281,6 +290,7 @@ class BeliefRummagingPolicy:
             self._queue = [("retouch", np.array([self._queue[0][1][0], self._touch_y]))]
         else:
             self._leave_lane(xy)
+        self._kind = "back_off"
         return back
 
     def _retouch(self, xy, far_touch) -> list[tuple[str, np.ndarray]]:
@@ -362,6 +372,7 @@ class BeliefRummagingPolicy:
                 self._queue.pop(0)
                 continue
             self._moving = True
+            self._kind = {"push": "push", "shove": "shove"}.get(kind, "travel")
             # The rest of the leg in equal steps, as few as the clip allows (the sweep's).
             leg = point - xy
             return leg / np.ceil(float(np.max(np.abs(leg))) / self.max_step - 1e-9)
