@@ -241,6 +241,31 @@ def test_a_felt_object_the_belief_does_not_place_is_touched_beside_then_left():
     assert touches_are_guarded(positions, contacts, pose)
 
 
+def test_touches_beside_from_where_the_gripper_backed_off_save_the_way_back():
+    """The previous test's layout with ``retouch_back`` 0: each touch beside moves sideways
+    where the gripper backed off to (2 cm behind its touch at x 0.18, so x 0.16) instead of
+    at the lanes' x (-0.04): the same five touches, and each of the four touches beside saves
+    the 0.20 m back (7 steps at 3 cm) and forth (the push's steps to the face: 0.22 m in
+    equal steps of the whole 0.42 m push, 8, against 0.02 m, 1), 13–14 actions each (the
+    legs' equal steps round differently)."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    played = {}
+    for back in (None, 0.0):
+        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                       RummageParams(coverage=BAND_NEAREST, max_actions=400,
+                                                     push_through_below=0.0,
+                                                     retouch_back=back))
+        played[back] = play(policy, pose, lambda: None)
+    positions, steps, contacts = played[0.0]
+    touched = positions[1:][contacts]
+    assert touched[:, 1] == pytest.approx([0.10, 0.13, 0.19, 0.22, 0.16], abs=1e-9)
+    assert touched[:, 0] == pytest.approx(0.18, abs=1e-3)  # guarded: stopped at the face
+    sideways = np.abs(np.diff(positions[:, 1])) > 1e-9
+    assert set(np.round(positions[:-1][sideways, 0], 3)) == {-0.04, 0.16}
+    assert 4 * 13 <= len(played[None][1]) - len(steps) <= 4 * 14
+    assert touches_are_guarded(positions, contacts, pose)
+
+
 def test_a_touch_on_one_side_of_the_gripper_is_followed_that_way():
     """The lane at y 0.10 meets the box (y 0.14..0.20) with the footprint's +y edge: the
     contact, at the middle of the overlap (y 0.145), lies 4.5 cm to +y of the gripper's centre

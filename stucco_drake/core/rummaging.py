@@ -64,6 +64,10 @@ class RummageParams:
             side of the gripper the contact was sensed on (more than ``side_margin`` from its
             centre line), else to one side, then the other.
         retouch_step: see ``retouches``.
+        retouch_back: how far behind where the gripper backed off to a touch beside moves
+            sideways (never behind the lanes' x); None: at the lanes' x, behind the start
+            (clear of a neighbour standing a step back from the felt object, at the cost of
+            the way back and forth).
         side_margin: see ``retouches``.
         transit_back: how far behind the start (along -x, as far as the workspace allows)
             the lanes begin and end: travel between lanes then passes clear of objects just
@@ -90,6 +94,7 @@ class RummageParams:
     lane_bumps: int = 2
     retouches: int = 2
     retouch_step: float = 0.03
+    retouch_back: float | None = None
     side_margin: float = 0.01
     transit_back: float = 0.04
     push_through_below: float = 0.5
@@ -305,9 +310,10 @@ class BeliefRummagingPolicy:
             offset = (1.0 if k % 2 == 0 else -1.0) * (k // 2 + 1) * p.retouch_step
         y = far_touch[1] + offset
         # Sideways along the lanes' x, behind the start: beside the felt object, a step
-        # back from it, often stands its neighbour.
+        # back from it, often stands its neighbour (unless ``retouch_back`` says nearer).
         lane_x = self.lanes[self._lane, 0, 0]
-        return [("move", np.array([lane_x, xy[1]])), ("move", np.array([lane_x, y])),
+        side_x = lane_x if p.retouch_back is None else max(lane_x, xy[0] - p.retouch_back)
+        return [("move", np.array([side_x, xy[1]])), ("move", np.array([side_x, y])),
                 ("push", np.array([far_touch[0], y])), ("move", np.array([lane_x, y]))]
 
     def _withdraw(self, xy) -> None:
