@@ -266,6 +266,42 @@ def test_touches_beside_from_where_the_gripper_backed_off_save_the_way_back():
     assert touches_are_guarded(positions, contacts, pose)
 
 
+def test_a_near_way_to_a_touch_beside_that_bumps_goes_round_by_the_lanes():
+    """A second box stands beside the felt one, a step back from it (x 0.021..0.179, y
+    0.17..0.23): with ``retouch_back`` 0 the sideways move from where the gripper backed off
+    (x 0.16) bumps it; the gripper backs off and goes round by the lanes' x (-0.04), and from
+    there on touches what it touches without the near way, at the same points (the touch
+    beside at y 0.13 now meets the second box's near face, footprint front at x 0.021)."""
+    felt, neighbour = np.array([0.3, 0.17, np.radians(90)]), np.array([0.1, 0.20, np.radians(90)])
+
+    def guarded_move_two(xy, step):
+        for fraction in np.linspace(0, 1, 31)[1:]:
+            if min(footprint_gap(xy + fraction * step, felt),
+                   footprint_gap(xy + fraction * step, neighbour)) <= 0:
+                return xy + (fraction - 1 / 30) * step, True
+        return xy + step, False
+
+    touched = {}
+    for back in (None, 0.0):
+        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                       RummageParams(coverage=BAND_NEAREST, max_actions=400,
+                                                     push_through_below=0.0,
+                                                     retouch_back=back))
+        xy, in_contact, points = START.copy(), False, []
+        while (step := policy.next_step(xy, in_contact, lambda: None)) is not None:
+            xy, in_contact = guarded_move_two(xy, step)
+            if in_contact:
+                points.append(xy.copy())
+        touched[back] = np.array(points)
+    assert policy.bumps == 1
+    bump = touched[0.0][1]  # the near way's bump: at x 0.16, short of y 0.13
+    assert bump[0] == pytest.approx(0.16, abs=1e-9) and 0.10 < bump[1] < 0.13
+    assert np.delete(touched[0.0], 1, axis=0) == pytest.approx(touched[None], abs=1e-9)
+    # Stopped within one guarded increment (1/30 of a step of at most 3 cm) of the face.
+    assert -0.019 - 0.001 - 1e-9 <= touched[None][1][0] <= -0.019
+    assert touched[None][1][1] == pytest.approx(0.13, abs=1e-9)
+
+
 def test_a_touch_on_one_side_of_the_gripper_is_followed_that_way():
     """The lane at y 0.10 meets the box (y 0.14..0.20) with the footprint's +y edge: the
     contact, at the middle of the overlap (y 0.145), lies 4.5 cm to +y of the gripper's centre

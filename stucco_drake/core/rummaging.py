@@ -65,9 +65,10 @@ class RummageParams:
             centre line), else to one side, then the other.
         retouch_step: see ``retouches``.
         retouch_back: how far behind where the gripper backed off to a touch beside moves
-            sideways (never behind the lanes' x); None: at the lanes' x, behind the start
-            (clear of a neighbour standing a step back from the felt object, at the cost of
-            the way back and forth).
+            sideways (never behind the lanes' x); a bump on the way there sends it round by
+            the lanes' x instead. None: always by the lanes' x, behind the start (clear of a
+            neighbour standing a step back from the felt object, at the cost of the way back
+            and forth).
         side_margin: see ``retouches``.
         transit_back: how far behind the start (along -x, as far as the workspace allows)
             the lanes begin and end: travel between lanes then passes clear of objects just
@@ -155,6 +156,9 @@ class BeliefRummagingPolicy:
         self.confidence, self.pose = 0.0, None
         self._lane, self._lane_bumps, self._retouches = -1, 0, 0
         self._touch_y, self._contact_xy = 0.0, None
+        # The touch beside under way while it is reached by the near way (its y and push
+        # end), to be reached by the lanes' x instead if that way bumps.
+        self._near_retouch: tuple[float, float] | None = None
         # The waypoints ahead: (kind, point), kind "push" (a contact there is felt) or "move".
         self._queue: list[tuple[str, np.ndarray]] = []
         self._stopped = False
@@ -256,6 +260,8 @@ class BeliefRummagingPolicy:
             if kind == "push":
                 return self._felt(xy, belief)
             self.bumps += 1
+            if self._near_retouch is not None:  # round by the lanes' x instead
+                return self._retouch_round(xy)
             self._lane_bumps += 1
             if self._lane_bumps > self.params.lane_bumps:
                 self._skip_beyond(xy)
@@ -313,8 +319,21 @@ class BeliefRummagingPolicy:
         # back from it, often stands its neighbour (unless ``retouch_back`` says nearer).
         lane_x = self.lanes[self._lane, 0, 0]
         side_x = lane_x if p.retouch_back is None else max(lane_x, xy[0] - p.retouch_back)
+        self._near_retouch = None if side_x == lane_x else (y, float(far_touch[0]))
+        return self._retouch_legs(xy, side_x, y, far_touch[0])
+
+    def _retouch_legs(self, xy, side_x, y, push_x) -> list[tuple[str, np.ndarray]]:
+        lane_x = self.lanes[self._lane, 0, 0]
         return [("move", np.array([side_x, xy[1]])), ("move", np.array([side_x, y])),
-                ("push", np.array([far_touch[0], y])), ("move", np.array([lane_x, y]))]
+                ("push", np.array([push_x, y])), ("move", np.array([lane_x, y]))]
+
+    def _retouch_round(self, xy) -> np.ndarray:
+        """The near way to a touch beside bumped: back off, then the lanes' x way."""
+        (y, push_x), self._near_retouch = self._near_retouch, None
+        self._queue = self._retouch_legs(xy, self.lanes[self._lane, 0, 0], y, push_x)
+        back = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
+        self._kind = "back_off"
+        return -back * self.params.back_off
 
     def _withdraw(self, xy) -> None:
         """Back along -x to the lanes' x at ``xy``'s y; then the next lane."""
@@ -340,6 +359,7 @@ class BeliefRummagingPolicy:
                 self._skipped.add(j)
 
     def _next_lane(self) -> None:
+        self._near_retouch = None
         self._lane, self._lane_bumps, self._retouches = self._lane + 1, 0, 0
         self._shoved, self._lane_rounds = False, 0
         while self._lane in self._skipped:
@@ -379,6 +399,8 @@ class BeliefRummagingPolicy:
                 continue
             self._moving = True
             self._kind = {"push": "push", "shove": "shove"}.get(kind, "travel")
+            if kind != "move":  # the way to a touch beside is behind
+                self._near_retouch = None
             # The rest of the leg in equal steps, as few as the clip allows (the sweep's).
             leg = point - xy
             return leg / np.ceil(float(np.max(np.abs(leg))) / self.max_step - 1e-9)
