@@ -266,9 +266,7 @@ class BeliefRummagingPolicy:
             if self._lane_bumps > self.params.lane_bumps:
                 self._skip_beyond(xy)
                 self._next_lane()
-            back = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
-            self._kind = "back_off"
-            return -back * self.params.back_off
+            return self._bounce()
         return self._follow(xy, belief)
 
     def _assess(self, xy, belief) -> np.ndarray | None:
@@ -331,6 +329,10 @@ class BeliefRummagingPolicy:
         """The near way to a touch beside bumped: back off, then the lanes' x way."""
         (y, push_x), self._near_retouch = self._near_retouch, None
         self._queue = self._retouch_legs(xy, self.lanes[self._lane, 0, 0], y, push_x)
+        return self._bounce()
+
+    def _bounce(self) -> np.ndarray:
+        """The back-off from a travel's contact: back along the last step."""
         back = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
         self._kind = "back_off"
         return -back * self.params.back_off
