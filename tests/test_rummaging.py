@@ -224,9 +224,7 @@ def test_a_felt_object_the_belief_does_not_place_is_touched_beside_then_left():
     box to the far end; lane 0.19 touches at 0.19, 0.22 and 0.16; lanes 0.28 and 0.01 pass
     it."""
     pose = np.array([0.3, 0.17, np.radians(90)])
-    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
-                                   RummageParams(coverage=BAND_NEAREST, max_actions=400,
-                                                 push_through_below=0.0))
+    policy = retouching_policy(None)
     positions, _steps, contacts = play(policy, pose, lambda: None)
     assert policy.rounds == 0 and policy.contacts == int(contacts.sum())
     touched_y = positions[1:][contacts][:, 1]
@@ -241,6 +239,14 @@ def test_a_felt_object_the_belief_does_not_place_is_touched_beside_then_left():
     assert touches_are_guarded(positions, contacts, pose)
 
 
+def retouching_policy(retouch_back):
+    """The policy of the touches-beside tests: nearest lane first, never pushing through."""
+    return BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                 RummageParams(coverage=BAND_NEAREST, max_actions=400,
+                                               push_through_below=0.0,
+                                               retouch_back=retouch_back))
+
+
 def test_touches_beside_from_where_the_gripper_backed_off_save_the_way_back():
     """The previous test's layout with ``retouch_back`` 0: each touch beside moves sideways
     where the gripper backed off to (2 cm behind its touch at x 0.18, so x 0.16) instead of
@@ -251,10 +257,7 @@ def test_touches_beside_from_where_the_gripper_backed_off_save_the_way_back():
     pose = np.array([0.3, 0.17, np.radians(90)])
     played = {}
     for back in (None, 0.0):
-        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
-                                       RummageParams(coverage=BAND_NEAREST, max_actions=400,
-                                                     push_through_below=0.0,
-                                                     retouch_back=back))
+        policy = retouching_policy(back)
         played[back] = play(policy, pose, lambda: None)
     positions, steps, contacts = played[0.0]
     touched = positions[1:][contacts]
@@ -283,10 +286,7 @@ def test_a_near_way_to_a_touch_beside_that_bumps_goes_round_by_the_lanes():
 
     touched = {}
     for back in (None, 0.0):
-        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
-                                       RummageParams(coverage=BAND_NEAREST, max_actions=400,
-                                                     push_through_below=0.0,
-                                                     retouch_back=back))
+        policy = retouching_policy(back)
         xy, in_contact, points = START.copy(), False, []
         while (step := policy.next_step(xy, in_contact, lambda: None)) is not None:
             xy, in_contact = guarded_move_two(xy, step)
@@ -312,9 +312,7 @@ def test_a_touch_on_one_side_of_the_gripper_is_followed_that_way():
     def overlap_middle(y):
         return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
 
-    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
-                                   RummageParams(coverage=BAND_NEAREST, max_actions=400,
-                                                 push_through_below=0.0))
+    policy = retouching_policy(None)
     positions, _steps, contacts = play(policy, pose, lambda: None, contact_y=overlap_middle)
     touched_y = positions[1:][contacts][:, 1]
     assert touched_y[:3] == pytest.approx([0.10, 0.13, 0.16], abs=1e-9)
