@@ -81,9 +81,10 @@ def footprint_gap(xy, pose) -> float:
 
 def guarded_move(xy, step, pose):
     """(where, touched): the footprint moved by ``step`` in 1/30 increments, stopped at the
-    first that would overlap BOX at ``pose``."""
+    first that would overlap BOX at ``pose`` (x, y, yaw), or at any of several poses (k, 3)."""
+    poses = np.atleast_2d(pose)
     for fraction in np.linspace(0, 1, 31)[1:]:
-        if footprint_gap(xy + fraction * step, pose) <= 0:
+        if min(footprint_gap(xy + fraction * step, p) for p in poses) <= 0:
             return xy + (fraction - 1 / 30) * step, True
     return xy + step, False
 

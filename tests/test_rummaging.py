@@ -277,19 +277,12 @@ def test_a_near_way_to_a_touch_beside_that_bumps_goes_round_by_the_lanes():
     beside at y 0.13 now meets the second box's near face, footprint front at x 0.021)."""
     felt, neighbour = np.array([0.3, 0.17, np.radians(90)]), np.array([0.1, 0.20, np.radians(90)])
 
-    def guarded_move_two(xy, step):
-        for fraction in np.linspace(0, 1, 31)[1:]:
-            if min(footprint_gap(xy + fraction * step, felt),
-                   footprint_gap(xy + fraction * step, neighbour)) <= 0:
-                return xy + (fraction - 1 / 30) * step, True
-        return xy + step, False
-
     touched = {}
     for back in (None, 0.0):
         policy = retouching_policy(back)
         xy, in_contact, points = START.copy(), False, []
         while (step := policy.next_step(xy, in_contact, lambda: None)) is not None:
-            xy, in_contact = guarded_move_two(xy, step)
+            xy, in_contact = guarded_move(xy, step, [felt, neighbour])
             if in_contact:
                 points.append(xy.copy())
         touched[back] = np.array(points)
