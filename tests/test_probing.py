@@ -173,3 +173,37 @@ def test_end_face_first_touches_the_short_face_before_the_long_one():
     assert np.linalg.norm(first[0].point - pose[:2]) == pytest.approx(0.079)
     for a, b in zip([default[2], default[0], default[1]], first, strict=True):
         assert np.array_equal(a.point, b.point) and np.array_equal(a.normal, b.normal)
+
+
+@pytest.mark.parametrize("yaw_deg", [90.0, 30.0])
+def test_extent_margin_keeps_the_footprint_clearance_off_the_box_and_starts_nearer(yaw_deg):
+    """With ``extent_margin`` the gripper's origin keeps out of the box grown by the
+    footprint's extent along the box's axes (plus ``clearance``), not by its radius (6.4 cm).
+    The footprint (8 x 10 cm) then never comes nearer the box than ``clearance`` while
+    travelling, though nearer than the radius would allow (the extent is the tighter margin),
+    and all three probes touch. At yaw 90 degrees the approach to the long face (normal -y)
+    starts 5 + 3 + 2 = 10 cm off it (half the footprint's 10 cm along y, clearance,
+    standoff), against 6.4 + 3 + 2 = 11.4 cm with the radius."""
+    pose = np.array([0.2, 0.0, np.radians(yaw_deg)])
+    params = ProbeParams(extent_margin=True, direct_only=False, discriminate=False,
+                         max_actions=60)  # fmt: skip
+    policy = FaceProbePolicy(BOX, FOOTPRINT, max_step=0.03, params=params)
+    xy, in_contact, travel_gaps, starts = np.array([0.2, -0.25]), False, [], []
+    for _ in range(params.max_actions):
+        phase_before = policy._phase
+        step = policy.next_step(xy, in_contact, pose)
+        if step is None:
+            break
+        if policy._last_phase == "approach" and phase_before == "travel":
+            starts.append(xy.copy())
+        xy, in_contact = guarded_move(xy, step, pose)
+        if policy._last_phase == "travel":
+            travel_gaps.append(footprint_gap(xy, pose))
+    assert policy.touches == 3 and policy.bumps == 0
+    # Corners are rounded 1 mm out; the footprint is sampled on a 2 mm grid (exact at its edges).
+    assert min(travel_gaps) >= params.clearance - 1e-6
+    if yaw_deg == 90.0:
+        # Along the long face the radius would keep the footprint 6.4 - 5 + 3 = 4.4 cm off.
+        assert min(travel_gaps) < 0.044 - 0.005
+        # The first approach starts where the travel ended: 10 cm below the face y = -0.03.
+        assert starts[0][1] == pytest.approx(-0.03 - 0.10, abs=params.arrive_tolerance)

@@ -74,6 +74,12 @@ class ProbeParams:
             ``results/report_layouts_3/`` was made.
         rival_temperature: divides the hypotheses' cost differences when the gain is judged.
         outcome_tolerance: approach distances counting as one outcome.
+        extent_margin: keep the gripper's origin out of the hypothesised target grown by the
+            footprint's extent along the target's own axes (and start the approach that far
+            out along the face's normal), instead of by the footprint's radius on every side.
+            Both keep the footprint off the target; the extent is the tighter for a
+            footprint longer than it is wide, and shortens every travel and approach. Off:
+            as every probe-policy folder before the development layouts' eighteenth look.
     """
 
     standoff: float = 0.02
@@ -95,6 +101,7 @@ class ProbeParams:
     outcome_tolerance: float = 0.015
     min_gain: float = 0.1
     max_probes: int = 6
+    extent_margin: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -282,11 +289,12 @@ class FaceProbePolicy:
         """(approach start, travel waypoints) of ``probe`` of the target at ``pose``, or None
         when the gripper cannot make it (not direct, or out of the workspace)."""
         p = self.params
-        # Travel ends outside the box grown by the footprint's radius; the approach
-        # starts there, along the face's normal.
-        far = probe.point + probe.normal * (self.radius + p.clearance + p.standoff)
         centre, half, yaw = outline_box(pose, self.shape)
-        grown = half + self.radius + p.clearance
+        # Travel ends outside the box grown by the footprint (its radius, or its extent along
+        # the box's axes); the approach starts there, along the face's normal.
+        margin, reach = self._margins(yaw, probe.normal)
+        far = probe.point + probe.normal * (reach + p.clearance + p.standoff)
+        grown = half + margin + p.clearance
         waypoints = travel_waypoints(xy, far, centre, grown, yaw)
         # Leaving the box's margin first (just backed off from a face) still counts as
         # direct: the exit is through the side the gripper is on.
@@ -296,6 +304,18 @@ class FaceProbePolicy:
         if direct and all(self.in_workspace(w) for w in waypoints):
             return far, waypoints
         return None
+
+    def _margins(self, yaw: float, normal: np.ndarray) -> tuple[np.ndarray, float]:
+        """(margin (2,) along the box's axes at ``yaw``, reach along ``normal``) by which the
+        footprint keeps its origin from the box (m): the radius, or with ``extent_margin``
+        the footprint's largest extent either way along each axis and along the normal. The
+        origin outside the box grown by the extents is outside the box's
+        Minkowski sum with the footprint (that sum lies within its bounding box in the box's
+        frame), so the footprint clears the box either way."""
+        if not self.params.extent_margin:
+            return np.full(2, self.radius), self.radius
+        along = self.footprint @ rotation_2d(yaw)  # (m, 2) footprint in the box's axes
+        return np.max(np.abs(along), axis=0), float(np.max(np.abs(self.footprint @ normal)))
 
     def _plan_informative(self, xy, pose, hypotheses) -> bool:
         """Sets up the probe the hypotheses disagree on most (``discriminate``); False when
