@@ -200,6 +200,9 @@ def test_extent_margin_keeps_the_footprint_clearance_off_the_box_and_starts_near
         if policy._last_phase == "travel":
             travel_gaps.append(footprint_gap(xy, pose))
     assert policy.touches == 3 and policy.bumps == 0
+    # The actions by phase add up to them; one retreat after each touch.
+    assert sum(policy.phase_actions.values()) == policy.actions
+    assert policy.phase_actions["retreat"] == 3 and policy.phase_actions["travel"] > 0
     # Corners are rounded 1 mm out; the footprint is sampled on a 2 mm grid (exact at its edges).
     assert min(travel_gaps) >= params.clearance - 1e-6
     if yaw_deg == 90.0:

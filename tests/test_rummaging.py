@@ -15,7 +15,8 @@ from stucco_drake.core.coverage import (
     lane_centres,
     waypoint_steps,
 )
-from stucco_drake.core.rummaging import BeliefRummagingPolicy, RummageParams
+from stucco_drake.core.rummage_params import RummageParams
+from stucco_drake.core.rummaging import BeliefRummagingPolicy
 
 MAX_STEP = 0.03
 START = np.array([0.0, 0.1])
@@ -155,6 +156,10 @@ def test_actions_are_tallied_by_what_they_were_for():
     assert sum(kinds.values()) == len(steps) and kinds["back_off"] == 1
     assert kinds["push"] + kinds.get("travel", 0) == first + 1
     assert kinds["probe"] == len(steps) - first - 2 > 0
+    # The probe round's steps by phase add up to them; a retreat follows each touch.
+    phases = policy.probe_phases
+    assert sum(phases.values()) == kinds["probe"] and phases["approach"] >= 1
+    assert phases.get("retreat", 0) == policy.touches
 
 
 def touches_are_guarded(positions, contacts, pose) -> bool:

@@ -10,7 +10,7 @@ import pytest
 
 from stucco_drake.core.coverage import CoverageParams
 from stucco_drake.core.probing import ProbeParams
-from stucco_drake.core.rummaging import RummageParams
+from stucco_drake.core.rummage_params import RummageParams
 
 # IB's prescribed actions 12-14 push the box (a development layout's log shows it); the
 # first 15 leave tracked points on it for the hypotheses.

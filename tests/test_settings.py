@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from stucco_drake.core.probing import ProbeParams
-from stucco_drake.core.rummaging import RummageParams
+from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.settings import plain_settings, settings_changes, settings_with
 
 

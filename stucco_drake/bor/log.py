@@ -38,7 +38,7 @@ from stucco_drake.bor.policies import PolicySettings, coverage_scene, policy_inf
 from stucco_drake.core.coverage import CoverageParams
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.probing import ProbeParams
-from stucco_drake.core.rummaging import RummageParams
+from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sets import PAPER_SCENES, scene_set

@@ -2,7 +2,7 @@
 
 - :class:`~stucco_drake.core.probing.ProbeParams`: the prescribed actions, then guarded probes
   where the target's pose hypotheses disagree, then of its likeliest pose (``--policy probe``).
-- :class:`~stucco_drake.core.rummaging.RummageParams`: rummaging chosen from the belief from
+- :class:`~stucco_drake.core.rummage_params.RummageParams`: rummaging chosen from the belief from
   the first action, stopping once the target is known (``--policy belief``).
 - :class:`~stucco_drake.core.coverage.CoverageParams`: no policy, the non-adaptive baseline:
   the scene with its actions replaced by the coverage sweep's raster (``--policy sweep``).
@@ -22,7 +22,8 @@ from stucco_drake.bor.grasp import build_grasp_scene
 from stucco_drake.core.coverage import CoverageParams, coverage_waypoints, waypoint_steps
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.probing import FaceProbePolicy, ProbeParams, gripper_footprint
-from stucco_drake.core.rummaging import BeliefRummagingPolicy, RummageParams
+from stucco_drake.core.rummage_params import RummageParams
+from stucco_drake.core.rummaging import BeliefRummagingPolicy
 from stucco_drake.robot.gripper_sdf import gripper_penetration
 from stucco_drake.scenes import BuiltScene, SceneFile
 from stucco_drake.systems.rummaging_policy import RummagingPolicy
@@ -91,9 +92,11 @@ def policy_info(policy: RummagingPolicy, context, prescribed: int) -> dict:
     core = policy.policy_state(context).policy
     if isinstance(core, FaceProbePolicy):
         return {"name": "probe", "prescribed_actions": prescribed, "probe_actions": core.actions,
-                "touches": core.touches, "probes": core.probes_done, "bumps": core.bumps}
+                "touches": core.touches, "probes": core.probes_done, "bumps": core.bumps,
+                "probe_phases": dict(sorted(core.phase_actions.items()))}
     return {"name": "belief", "actions": core.actions, "rounds": core.rounds,
             "touches": core.touches, "contacts": core.contacts, "bumps": core.bumps,
             "shoves": core.shoves, "confidence": core.confidence,
             "action_kinds": dict(sorted(core.action_kinds.items())),
+            "probe_phases": dict(sorted(core.probe_phases.items())),
             "confidence_trace": [[int(k), float(c)] for k, c in core.trace]}

@@ -201,6 +201,9 @@ class FaceProbePolicy:
         self._made: list[Probe] = []
         self._informative = False  # whether the current probe was chosen for its gain
         self.bumps = 0
+        # Actions by phase: "travel", "approach", "retreat" (from a touch), "bump" (back from
+        # a travel's contact).
+        self.phase_actions: dict[str, int] = {}
         self._probe_bumps = 0
         self._phase, self._probe, self._waypoints = "plan", None, []
         self._last_phase, self._last_xy, self._last_step = "", None, np.zeros(2)
@@ -210,6 +213,7 @@ class FaceProbePolicy:
         shared, read only)."""
         other = copy.copy(self)
         other._waypoints = list(self._waypoints)
+        other.phase_actions = dict(self.phase_actions)
         return other
 
     def next_step(self, gripper_xy, in_contact: bool, pose) -> np.ndarray | None:
@@ -222,6 +226,7 @@ class FaceProbePolicy:
         if step is None:
             return None
         self.actions += 1
+        self.phase_actions[self._last_phase] = self.phase_actions.get(self._last_phase, 0) + 1
         self._last_step = np.clip(step, -self.max_step, self.max_step)
         return self._last_step
 

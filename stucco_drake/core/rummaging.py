@@ -28,78 +28,14 @@ Planar points (x, y) in the world frame W (m); the gripper's yaw is fixed.
 from __future__ import annotations
 
 import copy
-import dataclasses
 from collections.abc import Callable
 
 import numpy as np
 
-from stucco_drake.core.coverage import CoverageParams, coverage_waypoints
-from stucco_drake.core.probing import FaceProbePolicy, ProbeParams
+from stucco_drake.core.coverage import coverage_waypoints
+from stucco_drake.core.probing import FaceProbePolicy
+from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
-
-
-@dataclasses.dataclass(frozen=True)
-class RummageParams:
-    """Settings of :class:`BeliefRummagingPolicy` (m unless noted).
-
-    Attributes:
-        coverage: the lanes explored (the coverage sweep's, the nearest to the start first).
-        probe: the probe rounds' settings (``max_actions``: of one round).
-        stop_confidence: the target confidence at which the policy stops (the confidence from
-            which a run counts as confident, ``stucco_drake.eval.sets.CONFIDENT_FROM``, chosen
-            on the development layouts).
-        verified_stop: stop only once the last probe round touched the target where the
-            hypotheses put it (a confidence from a few points, none of them predicted, is
-            no evidence that the target is among what was felt).
-        back_off: step back along -x after a push that sensed contact.
-        arrive_tolerance: distance at which a lane's waypoint counts as reached.
-        max_actions: actions in all.
-        max_rounds: probe rounds in all.
-        lane_rounds: probe rounds per lane (a round spent on clutter the belief took for the
-            target leaves the rounds of the lanes after it).
-        lane_bumps: contacts while moving to or from a lane's push before the lane is left.
-        retouches: how many times a felt object the belief does not place yet is pushed
-            again before the lane is left (a single touch leaves too few points for any
-            pose), each ``retouch_step`` further along y from the first touch, towards the
-            side of the gripper the contact was sensed on (more than ``side_margin`` from its
-            centre line), else to one side, then the other.
-        retouch_step: see ``retouches``.
-        retouch_back: how far behind where the gripper backed off to a touch beside moves
-            sideways (never behind the lanes' x); a bump on the way there sends it round by
-            the lanes' x instead. None: always by the lanes' x, behind the start (clear of a
-            neighbour standing a step back from the felt object, at the cost of the way back
-            and forth).
-        side_margin: see ``retouches``.
-        transit_back: how far behind the start (along -x, as far as the workspace allows)
-            the lanes begin and end: travel between lanes then passes clear of objects just
-            in front of the start, which the gripper's front (4 cm ahead of its origin)
-            would graze.
-        push_through_below: a lane whose felt object, once touched again or probed, the
-            belief places with a confidence below this is pushed through to its far end,
-            contacts ignored (once per lane; 0: never).
-        check_each_probe: ask the belief after each probe of a round that touched the
-            target (any probe without ``verified_stop``), not only once the round is over,
-            and stop there once it passes ``stop_confidence``.
-    """
-
-    coverage: CoverageParams = dataclasses.field(
-        default_factory=lambda: CoverageParams(nearest_first=True))
-    probe: ProbeParams = dataclasses.field(default_factory=lambda: ProbeParams(max_actions=30))
-    stop_confidence: float = 0.999
-    verified_stop: bool = True
-    back_off: float = 0.02
-    arrive_tolerance: float = 0.005
-    max_actions: int = 120
-    max_rounds: int = 6
-    lane_rounds: int = 2
-    lane_bumps: int = 2
-    retouches: int = 2
-    retouch_step: float = 0.03
-    retouch_back: float | None = None
-    side_margin: float = 0.01
-    transit_back: float = 0.04
-    push_through_below: float = 0.5
-    check_each_probe: bool = False
 
 
 def _belief_of(belief) -> tuple[np.ndarray | None, float]:
@@ -148,6 +84,7 @@ class BeliefRummagingPolicy:
         # "shove" (pushed through), "travel", "back_off" (from a push's or a travel's
         # contact) and "probe" (a probe round's, its travel included).
         self.action_kinds: dict[str, int] = {}
+        self._phases_done: dict[str, int] = {}  # the finished probe rounds' actions by phase
         self._kind = "travel"
         self._lane_rounds = 0
         self._skipped: set[int] = set()
@@ -174,6 +111,7 @@ class BeliefRummagingPolicy:
         other._skipped = set(self._skipped)
         other.trace = list(self.trace)
         other.action_kinds = dict(self.action_kinds)
+        other._phases_done = dict(self._phases_done)
         other._probe = None if self._probe is None else self._probe.copy()
         return other
 
@@ -191,6 +129,15 @@ class BeliefRummagingPolicy:
         self.action_kinds[self._kind] = self.action_kinds.get(self._kind, 0) + 1
         self._last_step = np.clip(step, -self.max_step, self.max_step)
         return self._last_step
+
+    @property
+    def probe_phases(self) -> dict[str, int]:
+        """The probe rounds' actions by phase (:attr:`FaceProbePolicy.phase_actions`), the
+        round under way included."""
+        phases = dict(self._phases_done)
+        for phase, count in (self._probe.phase_actions if self._probe else {}).items():
+            phases[phase] = phases.get(phase, 0) + count
+        return phases
 
     def sensed(self, points) -> None:
         """The contact points (m, W) of the latest action whose contacts are known (they come
@@ -221,6 +168,7 @@ class BeliefRummagingPolicy:
         self.touches += self._probe.touches
         self._verified = self._probe.touches > 0
         self.bumps += self._probe.bumps
+        self._phases_done = self.probe_phases
         self.rounds += 1
         self._lane_rounds += 1
         self._probe = None

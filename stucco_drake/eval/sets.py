@@ -15,7 +15,7 @@ Nothing is refused on these grounds: the table prints each scene's set so that i
 
 from __future__ import annotations
 
-from stucco_drake.core.rummaging import RummageParams
+from stucco_drake.core.rummage_params import RummageParams
 
 #: The paper's training scenes.
 TRAINING_SCENES = ("SELECT1", "SELECT2", "SELECT3", "SELECT4")
