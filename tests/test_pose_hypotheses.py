@@ -6,12 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.icp import rotations
 from stucco_drake.core.pose_hypotheses import (
     FreeSpace,
     PoseHypotheses,
     point_spread,
     pose_hypotheses,
+    weigh_hypotheses,
 )
 from stucco_drake.core.shapes import BoxSdf
 
@@ -143,3 +145,24 @@ def test_unexplained_points_are_the_clutter_placed_at_the_chosen_motion_scale():
     tracked = sensed + np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.0]])
     clutter = found.unexplained_points(sensed, tracked)
     np.testing.assert_allclose(clutter, [[0.1, 0.0, 0.05]], atol=1e-12)
+
+
+def test_a_tempered_confidence_counts_rivals_the_weights_leave_out():
+    """Three poses of the box 30 cm apart (a grasp at one closes on no other), each explaining
+    all three points, at costs 0, 4 and 30. The weights (temperature 1) keep the first two;
+    the grasp is made at the cheapest, and its confidence is its weight, 1 / (1 + e^-4). With
+    ``confidence_temperature`` 10 the confidence is formed over all three:
+    1 / (1 + e^-0.4 + e^-3), by hand; the grasp, the hypotheses and their weights are those
+    at temperature 1."""
+    poses = np.array([[0.5, 0.1, 0.3], [0.8, 0.1, 0.3], [0.5, 0.4, 0.3]])
+    costs = np.array([0.0, 4.0, 30.0])
+    explained = np.ones((3, 3), dtype=bool)
+    plain = weigh_hypotheses(poses, costs, explained, BOX, HypothesisParams())
+    assert len(plain.poses) == 2
+    assert plain.confidence == pytest.approx(1.0 / (1.0 + np.exp(-4.0)), abs=1e-12)
+    tempered = weigh_hypotheses(poses, costs, explained, BOX,
+                                HypothesisParams(confidence_temperature=10.0))  # fmt: skip
+    assert tempered.confidence == pytest.approx(
+        1.0 / (1.0 + np.exp(-0.4) + np.exp(-3.0)), abs=1e-12)
+    assert np.array_equal(tempered.pose, plain.pose)
+    assert np.array_equal(tempered.weights, plain.weights)

@@ -24,6 +24,13 @@ class HypothesisParams:
         free_space_tolerance: penetration into the robot ignored per (config, point) pair.
         free_space_scale: penetration beyond the tolerance costing one unit.
         temperature: divides the costs before the weights are formed (dimensionless).
+        confidence_temperature: divides the costs when the confidence is formed, over every
+            scored pose that explains ``min_explained`` points (the grasp is still chosen on
+            the weights above). The costs treat each contact point as an independent draw,
+            so a few more touches of one object, or of clutter flush with the target, make
+            differences of tens of units that are not evidence: tempered, the confidence
+            stops saturating at 1 on poses that miss. None: ``temperature`` over the
+            weighed hypotheses.
         min_explained: fewest contact points the chosen pose must explain for any confidence.
         n_restarts: ICP starts per proposal group.
         outline_spacing: spacing of the outline points ICP fits.
@@ -47,6 +54,7 @@ class HypothesisParams:
     free_space_tolerance: float = 0.002
     free_space_scale: float = 0.002
     temperature: float = 1.0
+    confidence_temperature: float | None = None
     min_explained: int = 3
     n_restarts: int = 20
     outline_spacing: float = 0.002

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from stucco_drake.core.free_space import SweptSlice, swept_configs
-from stucco_drake.core.grasp_choice import choose_grasp
+from stucco_drake.core.grasp_choice import choose_grasp, grasp_closes
 from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
 from stucco_drake.core.penetration import RobotPenetration
@@ -370,6 +370,17 @@ def cost_weights(costs, temperature: float) -> np.ndarray:
     return weights / weights.sum()
 
 
+def tempered_confidence(grasp, poses, costs, shape: BoxSdf | CylinderSdf,
+                        params: HypothesisParams) -> float:  # fmt: skip
+    """Weight, at ``params.confidence_temperature``, of the ``poses`` (k, 3) with ``costs``
+    (k,) under which ``grasp`` (x, y, closing yaw) closes on the target with the grasp
+    margins to spare."""
+    weights = cost_weights(costs, params.confidence_temperature)
+    closes = grasp_closes(np.asarray(grasp)[None], poses, shape, params.grasp_margin,
+                          params.grasp_angle_margin)[0]  # fmt: skip
+    return float(np.round(closes.astype(np.float64) @ weights, 12))
+
+
 def weigh_hypotheses(poses, costs, explained, shape: BoxSdf | CylinderSdf,
                      params: HypothesisParams, motion_scales=None) -> PoseHypotheses:  # fmt: skip
     """The :class:`PoseHypotheses` of scored poses ((k, 3), costs (k,), explained (k, n)):
@@ -379,7 +390,9 @@ def weigh_hypotheses(poses, costs, explained, shape: BoxSdf | CylinderSdf,
     margin = 15.0 * params.temperature  # weights below e^-15 of the best's count as none
     # Hypotheses weighing under e^-15 of the best, or explaining too few points to pin a
     # pose, carry no information: left out.
-    keep = (costs <= costs.min() + margin) & (explained.sum(axis=1) >= params.min_explained)
+    pinned = explained.sum(axis=1) >= params.min_explained
+    rivals = (poses[pinned], costs[pinned])  # what a tempered confidence is formed over
+    keep = (costs <= costs.min() + margin) & pinned
     keep |= costs == costs.min()
     order = np.flatnonzero(keep)[np.argsort(costs[keep], kind="stable")]
     poses, costs, explained = poses[order].copy(), costs[order], explained[order]
@@ -390,6 +403,8 @@ def weigh_hypotheses(poses, costs, explained, shape: BoxSdf | CylinderSdf,
                           angle_margin=params.grasp_angle_margin)  # fmt: skip
     chosen = _nearest(poses, choice.target_pose)
     confidence = choice.probability
+    if params.confidence_temperature is not None and len(rivals[0]):
+        confidence = tempered_confidence(choice.grasp, *rivals, shape, params)
     if explained[chosen].sum() < params.min_explained:
         confidence = 0.0
     poses[:, 2] = (poses[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
