@@ -166,3 +166,18 @@ def test_a_tempered_confidence_counts_rivals_the_weights_leave_out():
         1.0 / (1.0 + np.exp(-0.4) + np.exp(-3.0)), abs=1e-12)
     assert np.array_equal(tempered.pose, plain.pose)
     assert np.array_equal(tempered.weights, plain.weights)
+
+
+def test_variants_of_one_rival_count_once_in_the_tempered_confidence():
+    """The cheapest pose (cost 0) and five variants of a rival 30 cm away (cost 4, each
+    within 4 mm and 1 degree of the first of them): tempered at 10, the rival counts once,
+    1 / (1 + e^-0.4) by hand, not 1 / (1 + 5 e^-0.4)."""
+    rival = np.array([0.8, 0.1, 0.3])
+    variants = rival + np.array([[0.0, 0.0, 0.0], [0.004, 0.0, 0.0], [0.0, 0.004, 0.0],
+                                 [-0.003, 0.0, 0.01], [0.0, -0.003, -0.01]])  # fmt: skip
+    poses = np.vstack([[0.5, 0.1, 0.3], variants])
+    costs = np.array([0.0, 4.0, 4.0, 4.0, 4.0, 4.0])
+    explained = np.ones((6, 3), dtype=bool)
+    found = weigh_hypotheses(poses, costs, explained, BOX,
+                             HypothesisParams(confidence_temperature=10.0))  # fmt: skip
+    assert found.confidence == pytest.approx(1.0 / (1.0 + np.exp(-0.4)), abs=1e-12)

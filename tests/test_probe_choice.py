@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from stucco_drake.core.hypothesis_weights import distinct_rivals
 from stucco_drake.core.probe_choice import (
     BUMP,
-    distinct_rivals,
     footprint_meets,
     footprint_outline,
     outcome_entropy,

@@ -29,8 +29,9 @@ class HypothesisParams:
             the weights above). The costs treat each contact point as an independent draw,
             so a few more touches of one object, or of clutter flush with the target, make
             differences of tens of units that are not evidence: tempered, the confidence
-            stops saturating at 1 on poses that miss. None: ``temperature`` over the
-            weighed hypotheses.
+            stops saturating at 1 on poses that miss. None (the default): ``temperature``
+            over the weighed hypotheses. See ``results/development/README.md``, twentieth
+            look, for what 2 and 3 do on the development logs.
         min_explained: fewest contact points the chosen pose must explain for any confidence.
         n_restarts: ICP starts per proposal group.
         outline_spacing: spacing of the outline points ICP fits.

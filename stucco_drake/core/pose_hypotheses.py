@@ -40,8 +40,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from stucco_drake.core.free_space import SweptSlice, swept_configs
-from stucco_drake.core.grasp_choice import choose_grasp, grasp_closes
+from stucco_drake.core.grasp_choice import choose_grasp
 from stucco_drake.core.hypothesis_params import HypothesisParams
+from stucco_drake.core.hypothesis_weights import cost_weights, tempered_confidence
 from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_penetration import sample_cross_section
@@ -361,24 +362,6 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
     poses, costs, explained = scored(np.concatenate(
         [poses, _polish(rng, best, points, sigma, shape, outline, params)]))
     return poses, costs, explained
-
-
-def cost_weights(costs, temperature: float) -> np.ndarray:
-    """(k,) weights ``exp(-(cost - min cost) / temperature)`` of ``costs`` (k,), normalised."""
-    costs = np.asarray(costs, dtype=np.float64)
-    weights = np.exp(-(costs - costs.min()) / temperature)
-    return weights / weights.sum()
-
-
-def tempered_confidence(grasp, poses, costs, shape: BoxSdf | CylinderSdf,
-                        params: HypothesisParams) -> float:  # fmt: skip
-    """Weight, at ``params.confidence_temperature``, of the ``poses`` (k, 3) with ``costs``
-    (k,) under which ``grasp`` (x, y, closing yaw) closes on the target with the grasp
-    margins to spare."""
-    weights = cost_weights(costs, params.confidence_temperature)
-    closes = grasp_closes(np.asarray(grasp)[None], poses, shape, params.grasp_margin,
-                          params.grasp_angle_margin)[0]  # fmt: skip
-    return float(np.round(closes.astype(np.float64) @ weights, 12))
 
 
 def weigh_hypotheses(poses, costs, explained, shape: BoxSdf | CylinderSdf,

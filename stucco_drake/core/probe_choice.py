@@ -26,8 +26,8 @@ import itertools
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from stucco_drake.core.hypothesis_weights import cost_weights
 from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline
-from stucco_drake.core.pose_hypotheses import cost_weights
 
 #: Outcome of a hypothesis under which the gripper meets the target before the approach.
 BUMP = -1.0
@@ -151,23 +151,5 @@ def most_informative(candidates, poses, costs, shape, footprint, *,
     return best
 
 
-
-def distinct_rivals(poses, costs, count: int, distance: float = 0.02,
-                    angle: float = np.radians(15.0)) -> np.ndarray:  # fmt: skip
-    """Indices of up to ``count`` hypotheses, cheapest first, each at least ``distance`` (m)
-    or ``angle`` (rad, modulo a half turn) from every cheaper one taken: variants of one pose
-    tell nothing apart."""
-    poses = np.asarray(poses, dtype=np.float64)
-    taken: list[int] = []
-    for k in np.argsort(np.asarray(costs), kind="stable"):
-        turn = np.abs((poses[taken, 2] - poses[k, 2] + np.pi / 2) % np.pi - np.pi / 2)
-        near = (np.hypot(*(poses[taken, :2] - poses[k, :2]).T) < distance) & (turn < angle)
-        if not near.any():
-            taken.append(int(k))
-            if len(taken) == count:
-                break
-    return np.array(taken, dtype=int)
-
-
-__all__ = ["BUMP", "distinct_rivals", "footprint_meets", "footprint_outline", "most_informative",
-           "outcome_entropy", "probe_outcomes"]
+__all__ = ["BUMP", "footprint_meets", "footprint_outline", "most_informative", "outcome_entropy",
+           "probe_outcomes"]

@@ -31,7 +31,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from stucco_drake.core.probe_choice import distinct_rivals, most_informative
+from stucco_drake.core.hypothesis_weights import distinct_rivals
+from stucco_drake.core.probe_choice import most_informative
 from stucco_drake.core.probe_paths import rotation_2d, travel_waypoints
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
