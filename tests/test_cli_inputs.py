@@ -120,6 +120,9 @@ BAD_INPUTS = {
                                 "--policy belief: scene SYN2 has no target to grasp"),
     "sweep without a target": ("table --scenes SYN2 --policy sweep --out {tmp}/t",
                                "--policy sweep: scene SYN2 has no target to grasp"),
+    "estimates hypothesis params unknown key": (
+        "estimates --table {tmp}/a_folder --hypothesis-params {tmp}/typo.yaml",
+        "--hypothesis-params {tmp}/typo.yaml: lenght: not a setting of HypothesisParams"),
     "estimates scale > 1": ("estimates --table {tmp}/a_folder --motion-scales 0 1.5",
                             "--motion-scales: ", "in [0, 1], got [0.0, 1.5]"),
     "noise < 0": ("scenes noise --scenes FB --bubble-std -0.001 --out {tmp}/n",

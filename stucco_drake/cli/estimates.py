@@ -36,6 +36,10 @@ def add_estimates_command(subparsers) -> None:
                          help="the motion scales the hypotheses search, each in [0, 1] (default: "
                               "the estimator's; 0: the points where sensed, 1: where tracked); "
                               "other scales write estimates_<method>_scales_<S>...csv")
+    command.add_argument("--hypothesis-params", default=None, metavar="SETTINGS.yaml",
+                         help="a YAML mapping of HypothesisParams fields to replay the "
+                              "hypotheses with, e.g. confidence_temperature: 3.0; writes "
+                              "estimates_<method>_<file's stem>.csv")
     command.add_argument("--workers", type=positive_int, default=1,
                          help="logs scored in parallel processes (default 1); the rows keep "
                               "the logs' order")
@@ -104,7 +108,19 @@ def _motion_scales(given) -> tuple[tuple[float, ...], str]:
     return tuple(given), "_scales_" + "_".join(f"{s:g}" for s in given)
 
 
-def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales) -> dict:
+def _hypothesis_params(given) -> tuple[object, str]:
+    """(HypothesisParams from the YAML file ``given`` or None, the output name's suffix);
+    InputError on one line for a missing file or a bad key or value."""
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+    from stucco_drake.core.inputs import read_settings
+
+    if given is None:
+        return None, ""
+    return read_settings("--hypothesis-params", given, HypothesisParams()), "_" + Path(given).stem
+
+
+def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales,
+              hypothesis_params=None) -> dict:  # fmt: skip
     """One log's row of :func:`~stucco_drake.eval.target_estimates.score_estimates` for
     ``method`` replayed at the table's settings (runs in a worker)."""
     from stucco_drake.bor import log as bor_log
@@ -117,7 +133,8 @@ def score_log(path: Path, method: str, params, dx_model: str, stream: int, scale
     scored = []
 
     def score(log, tracker):
-        scored.append(score_estimates(log, tracker, penetration, scales=scales))
+        scored.append(score_estimates(log, tracker, penetration, hypothesis_params,
+                                      scales=scales))  # fmt: skip
 
     replay(log, method, log.seed + 1000 * stream, params if method == "stucco" else None,
            penetration=penetration, dx_model=dx_model, grasp=score)  # fmt: skip
@@ -131,6 +148,8 @@ def run_estimates(args: argparse.Namespace) -> int:
 
     out = Path(args.table)
     scales, suffix = _motion_scales(args.motion_scales)
+    hypothesis_params, params_suffix = _hypothesis_params(args.hypothesis_params)
+    suffix += params_suffix
     dx_model, params, stream = _table_settings(out)
     paths = sorted((out / "logs").glob("*.npz"))
     if not paths:
@@ -139,7 +158,8 @@ def run_estimates(args: argparse.Namespace) -> int:
                for row in RunResults(out / "runs.csv").rows()
                if row["method"] == args.method}  # fmt: skip
     task = functools.partial(score_log, method=args.method, params=params, dx_model=dx_model,
-                             stream=stream, scales=scales)
+                             stream=stream, scales=scales,
+                             hypothesis_params=hypothesis_params)
     rows = []
     with make_executor("process", args.workers) as executor:
         for scored in executor.map(task, paths):
