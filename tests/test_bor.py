@@ -293,3 +293,20 @@ def test_run_command_rejects_bad_stucco_params_in_one_line(capsys, tmp_path, mon
     assert main(["run", "--scene", "FB", *extra]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("stucco-drake run: error: ") and message in err and "\n" not in err
+
+
+def test_hypothesis_params_reach_the_diagrams_target_pose_estimator():
+    """Built, not simulated: the pose estimator named in the Diagram holds the settings given
+    (None: the defaults, as before they could be given)."""
+    from stucco_drake.bor.diagram import build_bor_diagram
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+
+    params = HypothesisParams(confidence_temperature=3.0)
+    bor = build_bor_diagram("FB", hypothesis_params=params)
+    system = bor.diagram.GetSubsystemByName("target_pose_estimator")
+    assert system is bor.target_estimator
+    assert system.hypothesis_params.confidence_temperature == 3.0
+    assert system.hypothesis_params == params
+    default = build_bor_diagram("FB").diagram.GetSubsystemByName("target_pose_estimator")
+    assert default.hypothesis_params == HypothesisParams()
+    assert default.hypothesis_params.confidence_temperature is None

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from stucco_drake.bor.log import _planar_spec, grasp_from_log, log_penetration, record_episode
+from stucco_drake.bor.log import (
+    _planar_spec,
+    grasp_from_log,
+    grasp_success,
+    log_penetration,
+    record_episode,
+)
 from stucco_drake.core.baselines import TRACKER_NAMES
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, PlanarSurface
@@ -119,6 +125,38 @@ def test_grasp_from_log_without_a_segment_is_a_failure(fb_log):
 
     assert grasp_from_log(fb_log, Empty(fb_log)) is None
     assert grasp_from_log(fb_log, Empty(fb_log), estimator="hypotheses") is None
+
+
+def test_grasp_from_log_weighs_hypotheses_with_the_given_settings(fb_log):
+    """The true outline's points make a grasp at the defaults (above); settings asking more
+    points of the chosen pose than the log has leave the hypotheses nothing to grasp."""
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+
+    strict = HypothesisParams(min_explained=fb_log.n_contacts + 1)
+    assert grasp_from_log(fb_log, _TrueOutline(fb_log), estimator="hypotheses",
+                          hypothesis_params=strict) is None  # fmt: skip
+    assert grasp_success(fb_log, _TrueOutline(fb_log), estimator="hypotheses",
+                         hypothesis_params=strict) is False  # fmt: skip
+
+
+def test_record_episode_builds_its_diagram_with_the_hypothesis_settings(monkeypatch):
+    import stucco_drake.bor.log as bor_log
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+
+    class Built(Exception):
+        pass
+
+    def build(*args, **kwargs):
+        raise Built(kwargs.get("hypothesis_params"))
+
+    monkeypatch.setattr(bor_log, "build_bor_diagram", build)
+    params = HypothesisParams(temperature=2.0)
+    with pytest.raises(Built) as built:
+        record_episode("FB", 0, hypothesis_params=params)
+    assert built.value.args[0] is params
+    with pytest.raises(Built) as built:
+        record_episode("FB", 0)
+    assert built.value.args[0] is None
 
 
 def test_planar_specs_of_turned_and_lying_shapes():

@@ -28,6 +28,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from stucco_drake.bor.grasp import build_grasp_scene
 from stucco_drake.bor.policies import PolicySettings, add_policy
 from stucco_drake.core.baselines import make_tracker
+from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.robot.gripper_sdf import gripper_penetration
@@ -203,6 +204,7 @@ def build_bor_diagram(
     dx_model: str = "ee",
     external_actions: bool = False,
     policy: PolicySettings | None = None,
+    hypothesis_params: HypothesisParams | None = None,
 ) -> BorDiagram:
     """Builds the BOR Diagram of ``scene`` (a SceneFile or a scene name) with ``method``.
 
@@ -224,6 +226,8 @@ def build_bor_diagram(
             :mod:`stucco_drake.bor.policies`): ProbeParams, the actions then probes of the
             target's likeliest pose; RummageParams, rummaging chosen from the belief from
             the start; None: the actions alone.
+        hypothesis_params: the target pose estimator's hypotheses' settings (HypothesisParams,
+            m and rad; None: the defaults): its confidence, a policy's choices and the grasp.
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
     # The grasp executor sits in the scene from the start (transparent until a grasp starts),
@@ -264,6 +268,7 @@ def build_bor_diagram(
                         sub.GetOutputPort("contact_results"), sub.GetOutputPort("body_poses"),
                         noise.bubble_point_std, bubble_seed),
         truth=truth, truth_state=sub.GetOutputPort("plant_state"), dx_model=dx_model,
+        hypothesis_params=hypothesis_params,
     )  # fmt: skip
     tracking, target, assembler = chain.tracking, chain.target_estimator, chain.assembler
     chooser = None if policy is None else add_policy(builder, sub, built, chain, policy,

@@ -200,6 +200,7 @@ def run_episode(
     dx_model: str = "ee",
     tracker_params=None,
     target_estimator: str = "rules",
+    hypothesis_params=None,
 ) -> EpisodeResult:
     """Plays the first ``n_actions`` actions of ``scene`` (all by default) through the BOR
     Diagram (``bor``, or one built for ``method`` and ``seed``), then scores the tracking.
@@ -211,15 +212,17 @@ def run_episode(
     ``on_action(k, action_contacts)`` is called after each action's contacts are formed;
     ``grasp`` (see :data:`GraspHook`) after the last action's pose estimate. ``dx_model``
     (``"ee"``, the paper, ``"normal"`` or ``"cone"``) is how the tracker moves contact
-    points and ``tracker_params`` the method's parameters (None: the scene's for STUCCO, the
-    paper's for the baselines), when the Diagram is built here. ``target_estimator`` says
+    points, ``tracker_params`` the method's parameters (None: the scene's for STUCCO, the
+    paper's for the baselines) and ``hypothesis_params`` the pose hypotheses' (None: the
+    defaults), when the Diagram is built here. ``target_estimator`` says
     which estimate is scored and given to ``grasp``: ``"rules"``, the segment selection's
     ``estimate``, or ``"hypotheses"``, the ``pose_hypotheses`` (grasp them with
     :func:`hypotheses_grasp`; :data:`GRASP_HOOKS` pairs each with its hook).
     """
     scene = load_scene(scene) if isinstance(scene, str) else scene
     bor = bor or build_bor_diagram(scene, method, seed, tracker_params=tracker_params,
-                                   meshcat=meshcat, dx_model=dx_model)
+                                   meshcat=meshcat, dx_model=dx_model,
+                                   hypothesis_params=hypothesis_params)
     total = len(scene.actions) if bor.policy is None else bor.policy.max_actions
     n_actions = total if n_actions is None else min(int(n_actions), total)
     if simulator is None:

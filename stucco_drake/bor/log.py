@@ -214,6 +214,7 @@ def record_episode(
     tracker_params=None,
     dx_model: str = "ee",
     policy: PolicySettings | CoverageParams | None = None,
+    hypothesis_params=None,
 ) -> EpisodeLog:
     """Simulates ``scene`` once with run ``seed``'s perturbed actions and logs it.
 
@@ -224,8 +225,9 @@ def record_episode(
     pose hypotheses; RummageParams, rummaging chosen from them from the first action;
     CoverageParams, the coverage sweep's raster instead of the prescribed actions. With a
     policy in the Diagram, ``info["policy"]`` says what it did
-    (:func:`~stucco_drake.bor.policies.policy_info`). Every random stream derives from
-    ``seed``. Returns the log; the plant's final [q; v] is its ``final_state``.
+    (:func:`~stucco_drake.bor.policies.policy_info`); ``hypothesis_params`` sets its live pose
+    hypotheses (None: the defaults). Every random stream derives from ``seed``. Returns the
+    log; the plant's final [q; v] is its ``final_state``.
     """
     base = load_scene(scene) if isinstance(scene, str) else scene
     if isinstance(policy, CoverageParams):
@@ -233,7 +235,7 @@ def record_episode(
         policy = None
     scene = perturbed_scene(base, seed, action_noise)
     bor = build_bor_diagram(scene, method, seed, tracker_params=tracker_params,
-                            dx_model=dx_model, policy=policy)
+                            dx_model=dx_model, policy=policy, hypothesis_params=hypothesis_params)
     simulator = make_bor_simulator(bor)
     recorder = EpisodeRecorder(bor, simulator.get_mutable_context())
     result = run_episode(scene, method, seed, n_actions, bor=bor, simulator=simulator,
@@ -265,7 +267,7 @@ def _grasp_scene(scene: str):
 
 
 def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
-                   estimator: str = "rules"):
+                   estimator: str = "rules", hypothesis_params=None):
     """Grasp the target where the tracker's points say it is, from the logged final state.
 
     ``estimator`` picks how the target's pose is estimated, with a generator seeded by
@@ -275,8 +277,9 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
       (:func:`~stucco_drake.eval.target_estimates.rules_estimate`); a round target is closed
       on away from the points outside the fitted segment;
     * ``"hypotheses"``: the grasp chosen across weighted pose hypotheses
-      (:func:`~stucco_drake.eval.target_estimates.hypotheses_estimate`); a round target is
-      closed on away from the points the grasped pose does not explain.
+      (:func:`~stucco_drake.eval.target_estimates.hypotheses_estimate`, with
+      ``hypothesis_params``; None: the defaults); a round target is closed on away from the
+      points the grasped pose does not explain.
 
     The grasp then runs in a freshly built grasp scene set to the logged plant state, that of
     ``scene`` (a scene name or file; default: the shipped scene named ``log.scene``). Returns
@@ -293,7 +296,8 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
             return None
         pose, clutter = estimate.pose, estimate_clutter(estimate, points)
     elif estimator == "hypotheses":
-        found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log))
+        found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log),
+                                    hypothesis_params)
         if found is None:
             return None
         pose, clutter = found.pose, found.unexplained_points(log.contact_points, points)
@@ -310,10 +314,10 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
 
 
 def grasp_success(log: EpisodeLog, tracker, scene: str | None = None,
-                  estimator: str = "rules") -> bool:
-    """The ``grasp`` hook of :func:`stucco_drake.eval.replay.replay` for Drake logs (``scene``
-    and ``estimator`` as :func:`grasp_from_log`'s)."""
-    result = grasp_from_log(log, tracker, scene, estimator)
+                  estimator: str = "rules", hypothesis_params=None) -> bool:
+    """The ``grasp`` hook of :func:`stucco_drake.eval.replay.replay` for Drake logs (``scene``,
+    ``estimator`` and ``hypothesis_params`` as :func:`grasp_from_log`'s)."""
+    result = grasp_from_log(log, tracker, scene, estimator, hypothesis_params)
     return bool(result is not None and result.success)
 
 

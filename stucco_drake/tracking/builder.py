@@ -30,6 +30,7 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 from pydrake.systems.primitives import MatrixGain
 
+from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.systems.action_contacts_assembler import ActionContactsAssembler
@@ -108,6 +109,7 @@ def add_contact_tracking(
     truth=None,
     truth_state: OutputPort | None = None,
     dx_model: str = "ee",
+    hypothesis_params: HypothesisParams | None = None,
 ) -> ContactTracking:
     """Adds the contact-tracking chain to ``builder``; returns its systems and outputs.
 
@@ -136,6 +138,10 @@ def add_contact_tracking(
         truth, truth_state: an optional ground-truth labeller for scoring and the port of the
             state it reads (see :class:`ActionContactsAssembler`).
         dx_model: how tracked contact points move (see :class:`SoftTrackingFilter`).
+        hypothesis_params: settings of the target pose estimator's pose hypotheses (m, rad
+            and dimensionless costs, see
+            :class:`~stucco_drake.core.hypothesis_params.HypothesisParams`; None: its
+            defaults).
     """
     _check_arguments(penetration, truth, truth_state)
     h = float(time_step)
@@ -147,7 +153,8 @@ def add_contact_tracking(
                              bubbles)  # fmt: skip
     assembler = _add_assembler(builder, h, detector, isolator, pose, truth, truth_state)
     tracking, target = _add_tracking(builder, h, assembler, tracker, tracker_seed, penetration,
-                                     target_shape, icp_seed, dx_model)  # fmt: skip
+                                     target_shape, icp_seed, dx_model,
+                                     hypothesis_params)  # fmt: skip
     chain = ContactTracking(estimator, detector, pose, bubbles, isolator, assembler, tracking,
                             target, {})  # fmt: skip
     chain.outputs = {name: getattr(chain, system).GetOutputPort(name) for system, name in OUTPUTS}
@@ -213,13 +220,13 @@ def _add_isolator(builder, h, cpf_seed, isolator_kwargs, estimator, pose, detect
 
 
 def _add_tracking(builder, h, assembler, tracker, tracker_seed, penetration, target_shape,
-                  icp_seed, dx_model):  # fmt: skip
+                  icp_seed, dx_model, hypothesis_params=None):  # fmt: skip
     tracking = builder.AddNamedSystem("soft_tracking", SoftTrackingFilter(
         tracker, tracker_seed, h, dx_model=dx_model, robot_sdf=penetration.robot_sdf))
     for name in ("ee_pose", "action_contacts"):
         builder.Connect(assembler.GetOutputPort(name), tracking.GetInputPort(name))
-    target = builder.AddNamedSystem(
-        "target_pose_estimator", TargetPoseEstimator(target_shape, penetration, icp_seed, h))
+    target = builder.AddNamedSystem("target_pose_estimator", TargetPoseEstimator(
+        target_shape, penetration, icp_seed, h, hypothesis_params=hypothesis_params))
     builder.Connect(assembler.GetOutputPort("ee_pose"), target.GetInputPort("ee_pose"))
     for name in ("map_points", "segment_labels", "tracked_action", "point_spread"):
         builder.Connect(tracking.GetOutputPort(name), target.GetInputPort(name))
