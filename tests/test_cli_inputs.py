@@ -7,11 +7,13 @@ the test with a traceback instead of the expected line. A control test shows tha
 arguments do reach the tripwire.
 """
 
+import functools
 import os
 import subprocess
 import sys
 
 import pytest
+import yaml
 
 from stucco_drake.cli import main
 from stucco_drake.core.inputs import InputError, prepare_output_file, prepare_output_folder
@@ -78,6 +80,8 @@ def paths(tmp_path):
     (tmp_path / "typo.yaml").write_text("lenght: 0.02\n")
     (tmp_path / "broken.yaml").write_text("length: [0.02\n")
     (tmp_path / "bad.yaml").write_text("probe:\n  max_bumps: 1.5\n")
+    (tmp_path / "hypotheses.yaml").write_text("confidence_temperature: 3.0\n")
+    (tmp_path / "bad_hypotheses.yaml").write_text("min_explained: 2.5\n")
     (tmp_path / "old_sweep").mkdir()
     (tmp_path / "old_sweep" / "sweep.csv").write_text("scene,seed,method,fmi\n")
     return tmp_path
@@ -152,6 +156,22 @@ BAD_INPUTS = {
     "policy params, prescribed": ("table --scenes SYN2 --policy-params {tmp}/bad.yaml "
                                   "--out {tmp}/t",
                                   "--policy-params: --policy prescribed takes no settings"),
+    "table hypothesis params unknown key": (
+        "table --scenes FB --hypothesis-params {tmp}/typo.yaml --out {tmp}/t",
+        "--hypothesis-params {tmp}/typo.yaml: lenght: not a setting of HypothesisParams"),
+    "table hypothesis params bad value": (
+        "table --scenes FB --hypothesis-params {tmp}/bad_hypotheses.yaml --out {tmp}/t",
+        "--hypothesis-params {tmp}/bad_hypotheses.yaml: min_explained: expected an integer, "
+        "got 2.5"),
+    "table hypothesis params missing": (
+        "table --scenes FB --hypothesis-params {tmp}/none.yaml --out {tmp}/t",
+        "--hypothesis-params: no such file", "none.yaml"),
+    "table hypothesis params, synthetic scene": (
+        "table --scenes FB SYN2 --hypothesis-params {tmp}/hypotheses.yaml --out {tmp}/t",
+        "--hypothesis-params: scene SYN2 has no target pose estimator"),
+    "run hypothesis params unknown key": (
+        "run --scene FB --hypothesis-params {tmp}/typo.yaml",
+        "--hypothesis-params {tmp}/typo.yaml: lenght: not a setting of HypothesisParams"),
     "params a folder": ("run --scene FB --stucco-params {tmp}/a_folder",
                         "cannot read", "a_folder (Is a directory)"),
     # Output paths.
@@ -221,6 +241,94 @@ def test_policy_settings_reach_the_episodes_and_a_folder_keeps_its_own(
                           "end_face_first", "not {}")
 
 
+def test_hypothesis_settings_reach_the_episodes_and_grasps_and_a_folder_keeps_its_own(
+    tmp_path, tripwire, capsys, monkeypatch
+):
+    """``table --policy probe --hypothesis-params``: the episodes are recorded under both the
+    policy's and the hypotheses' settings, the grasps (wrapped for the target estimator as
+    the replay does) made with the latter; only the fields that differ from the defaults are
+    recorded, and the folder then refuses other hypothesis settings."""
+    import stucco_drake.bor.log
+    import stucco_drake.eval.cli_table
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+
+    seen, calls = {}, {}
+
+    def make_table(scenes, methods, runs, out, executor, **kwargs):
+        seen.update(kwargs)
+        raise WorkStarted("the command started its work")
+
+    def record_episode(scene, seed, **kwargs):
+        calls["record"] = (scene.name, seed, kwargs)
+
+    def grasp_from_log(log, tracker, scene, estimator, hypothesis_params):
+        calls["grasp"] = (estimator, hypothesis_params)
+
+    monkeypatch.setattr(stucco_drake.eval.cli_table, "make_table", make_table)
+    monkeypatch.setattr(stucco_drake.bor.log, "record_episode", record_episode)
+    monkeypatch.setattr(stucco_drake.bor.log, "grasp_from_log", grasp_from_log)
+    # Two fields, one of them at its default: only the other is a change.
+    (tmp_path / "hypotheses.yaml").write_text("confidence_temperature: 3.0\nmin_explained: 3\n")
+    (tmp_path / "other.yaml").write_text("confidence_temperature: 2.0\n")
+    argv = ["table", "--scenes", "FB", "--policy", "probe", "--out", str(tmp_path / "t")]
+    with pytest.raises(WorkStarted):
+        main([*argv, "--hypothesis-params", str(tmp_path / "hypotheses.yaml")])
+    expected = HypothesisParams(confidence_temperature=3.0)
+    source = seen["sources"]["FB"]
+    source.produce("FB", 4)
+    name, seed, kwargs = calls["record"]
+    assert (name, seed) == ("FB", 4) and kwargs["hypothesis_params"] == expected
+    assert kwargs["policy"].max_bumps == 1  # the policy's own settings are kept beside them
+    functools.partial(source.grasp, estimator="hypotheses")(None, None)  # as replay_cached
+    assert calls["grasp"] == ("hypotheses", expected)
+    assert seen["hypothesis_params"] == {"confidence_temperature": 3.0}
+    config = yaml.safe_load((tmp_path / "t" / "table_config.yaml").read_text())
+    assert config["hypothesis_params"] == {"confidence_temperature": 3.0}
+    for other in ([], ["--hypothesis-params", str(tmp_path / "other.yaml")]):
+        assert_one_line_error([*argv, *other], capsys, "table_config.yaml",
+                              "--hypothesis-params {'confidence_temperature': 3.0}, not ")
+
+
+def test_a_table_folder_recorded_before_hypothesis_settings_existed_keeps_the_defaults(
+    tmp_path, tripwire, capsys
+):
+    argv = ["table", "--scenes", "FB", "--out", str(tmp_path)]
+    with pytest.raises(WorkStarted):
+        main(argv)
+    path = tmp_path / "table_config.yaml"
+    config = yaml.safe_load(path.read_text())
+    assert config.pop("hypothesis_params") == {}
+    path.write_text(yaml.safe_dump(config))  # as written before the key existed
+    with pytest.raises(WorkStarted):  # accepted: the same setting
+        main(argv)
+    assert "hypothesis_params" not in yaml.safe_load(path.read_text())  # left as it was
+    (tmp_path / "hypotheses.yaml").write_text("confidence_temperature: 3.0\n")
+    assert_one_line_error([*argv, "--hypothesis-params", str(tmp_path / "hypotheses.yaml")],
+                          capsys, "--hypothesis-params {}, not ")
+
+
+def test_run_hands_its_hypothesis_settings_to_the_episode(tmp_path, tripwire, monkeypatch):
+    import stucco_drake.bor.episode
+    import stucco_drake.scenes.meshcat_session
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+
+    seen = {}
+
+    def run_episode(*args, **kwargs):
+        seen.update(kwargs)
+        raise WorkStarted("the command started its work")
+
+    monkeypatch.setattr(stucco_drake.bor.episode, "run_episode", run_episode)
+    monkeypatch.setattr(stucco_drake.scenes.meshcat_session, "start_meshcat", lambda *a: None)
+    (tmp_path / "hypotheses.yaml").write_text("grasp_margin: 0.02\n")
+    with pytest.raises(WorkStarted):
+        main(["run", "--scene", "FB", "--hypothesis-params", str(tmp_path / "hypotheses.yaml")])
+    assert seen["hypothesis_params"] == HypothesisParams(grasp_margin=0.02)
+    with pytest.raises(WorkStarted):
+        main(["run", "--scene", "FB"])
+    assert seen["hypothesis_params"] is None  # the defaults, as before the option
+
+
 @pytest.mark.skipif(
     not hasattr(os, "geteuid") or os.geteuid() == 0,
     reason="needs a user whom a folder's permissions bind",
@@ -251,12 +359,15 @@ def test_a_read_only_folder_is_refused_before_any_work(tmp_path, tripwire, capsy
     "diagram --scene FB --out {tmp}/new/bor.svg",
     "table --scenes SYN2 --out {tmp}/new",
     "table --scenes FB --policy probe --policy-params {tmp}/probe.yaml --out {tmp}/new",
+    "table --scenes FB --hypothesis-params {tmp}/hypotheses.yaml --out {tmp}/new",
+    "run --scene FB --hypothesis-params {tmp}/hypotheses.yaml --plot {tmp}/new/fb.png",
     "run --scene FB --policy belief --policy-params {tmp}/probe.yaml --plot {tmp}/new/fb.png",
     "sweep --method dbscan --scenes SYN2 --out {tmp}/new",
 ])  # fmt: skip
 def test_good_inputs_pass_the_checks(argv, tmp_path, tripwire):
     (tmp_path / "good.yaml").write_text("n_particles: 50\n")
     (tmp_path / "probe.yaml").write_text("max_actions: 20\n")
+    (tmp_path / "hypotheses.yaml").write_text("confidence_temperature: 3.0\n")
     with pytest.raises(WorkStarted):
         main(argv.format(tmp=tmp_path).split())
     assert (tmp_path / "new").is_dir()  # the output's folder is made before the work

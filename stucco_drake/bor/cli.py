@@ -16,6 +16,7 @@ import numpy as np
 
 from stucco_drake.core.inputs import (
     InputError,
+    hypothesis_settings_of,
     non_negative_int,
     policy_settings_of,
     positive_int,
@@ -60,6 +61,10 @@ def add_run_command(subparsers) -> None:
     run.add_argument("--target-estimator", choices=("rules", "hypotheses"), default="hypotheses",
                      help="where the grasp is made: the grasp chosen across the weighted pose "
                           "hypotheses (default), or Table II's segment-selection estimate")
+    run.add_argument("--hypothesis-params", metavar="SETTINGS.yaml", default=None,
+                     help="the target pose estimator's HypothesisParams as YAML overrides of "
+                          "its defaults (the live hypotheses, a policy's choices and stop, the "
+                          "grasp across them), e.g. confidence_temperature: 3.0")
     run.add_argument("--meshcat", action="store_true", help="show the run live in Meshcat")
     run.add_argument("--record", metavar="OUT.html",
                      help="save a standalone Meshcat HTML recording of the run")
@@ -99,6 +104,7 @@ def run_bor(args: argparse.Namespace) -> int:
         raise InputError(f"--stucco-params is for --method stucco, not {args.method}")
     params = read_stucco_params(args.stucco_params)
     settings, _ = policy_settings_of(args.policy, args.policy_params, POLICY_SETTINGS)
+    hypothesis_params, _ = hypothesis_settings_of(args.hypothesis_params)
     # A folder runs each of its scenes.
     scenes = [load_scene(path) for path in scene_paths(args.scene)]
     if len(scenes) > 1 and (args.record or args.plot):
@@ -113,11 +119,13 @@ def run_bor(args: argparse.Namespace) -> int:
         elif args.policy != "prescribed":
             bor = build_bor_diagram(scene, args.method, args.seed, meshcat=meshcat,
                                     tracker_params=params, dx_model=args.dx_model,
-                                    policy=settings)
+                                    policy=settings, hypothesis_params=hypothesis_params)
+        # The hook grasps at the Diagram's own estimate, made with ``hypothesis_params``.
         grasp = _grasp_hook(not args.no_grasp, args.target_estimator)
         result = run_episode(scene, args.method, args.seed, args.actions, bor=bor,
                              meshcat=meshcat, grasp=grasp, dx_model=args.dx_model,
-                             tracker_params=params, target_estimator=args.target_estimator)
+                             tracker_params=params, target_estimator=args.target_estimator,
+                             hypothesis_params=hypothesis_params)
         print(result.summary(), flush=True)
     if record:
         save_recording(meshcat, record)

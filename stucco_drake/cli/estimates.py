@@ -1,7 +1,8 @@
 """``stucco-drake estimates``: both target-pose estimators on a table's logged episodes.
 
-Replays a method on every log of a ``table`` output folder, at that folder's recorded settings,
-and scores the segment-selection rules and the weighted hypotheses against the target's final
+Replays a method on every log of a ``table`` output folder, at that folder's recorded settings
+(the target pose estimator's among them, unless ``--hypothesis-params`` overrides them), and
+scores the segment-selection rules and the weighted hypotheses against the target's final
 pose (:func:`~stucco_drake.eval.target_estimates.score_estimates`), without simulating a grasp.
 Each row joins the table's own grasp outcome for the method (made with the rules' estimate).
 Writes ``OUT/estimates_<method>.csv`` and prints a summary per base scene.
@@ -18,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from stucco_drake.core.inputs import InputError, positive_int
+from stucco_drake.core.inputs import InputError, hypothesis_settings_of, positive_int
 
 #: Outline error (m) under which an estimate is counted as near the truth in the summary.
 NEAR = 0.02
@@ -38,7 +39,8 @@ def add_estimates_command(subparsers) -> None:
                               "other scales write estimates_<method>_scales_<S>...csv")
     command.add_argument("--hypothesis-params", default=None, metavar="SETTINGS.yaml",
                          help="a YAML mapping of HypothesisParams fields to replay the "
-                              "hypotheses with, e.g. confidence_temperature: 3.0; writes "
+                              "hypotheses with, e.g. confidence_temperature: 3.0, instead of "
+                              "the table's recorded ones; writes "
                               "estimates_<method>_<file's stem>.csv")
     command.add_argument("--workers", type=positive_int, default=1,
                          help="logs scored in parallel processes (default 1); the rows keep "
@@ -47,14 +49,22 @@ def add_estimates_command(subparsers) -> None:
 
 
 def _table_settings(out: Path):
+    """(dx_model, STUCCO's parameters, filter stream, the target pose estimator's
+    HypothesisParams or None for the defaults) the table folder ``out`` recorded."""
+    from stucco_drake.core.hypothesis_params import HypothesisParams
     from stucco_drake.core.params import SoftTrackingParams
+    from stucco_drake.core.settings import settings_with
     from stucco_drake.eval.cli_table import TABLE_CONFIG
 
     try:
         config = yaml.safe_load((out / TABLE_CONFIG).read_text(encoding="utf-8"))
         params = SoftTrackingParams.from_mapping(config["stucco_params"])
-        return config["dx_model"], params, int(config.get("filter_stream", 0))
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as error:
+        # A folder recorded without the key, or with no changes, used the defaults.
+        changes = config.get("hypothesis_params") or {}
+        hypotheses = (settings_with(HypothesisParams(), changes, "hypothesis_params.")
+                      if changes else None)  # fmt: skip
+        return config["dx_model"], params, int(config.get("filter_stream", 0)), hypotheses
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, AttributeError) as error:
         raise InputError(f"--table {out}: no readable {TABLE_CONFIG} ({error})") from None
 
 
@@ -108,17 +118,6 @@ def _motion_scales(given) -> tuple[tuple[float, ...], str]:
     return tuple(given), "_scales_" + "_".join(f"{s:g}" for s in given)
 
 
-def _hypothesis_params(given) -> tuple[object, str]:
-    """(HypothesisParams from the YAML file ``given`` or None, the output name's suffix);
-    InputError on one line for a missing file or a bad key or value."""
-    from stucco_drake.core.hypothesis_params import HypothesisParams
-    from stucco_drake.core.inputs import read_settings
-
-    if given is None:
-        return None, ""
-    return read_settings("--hypothesis-params", given, HypothesisParams()), "_" + Path(given).stem
-
-
 def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales,
               hypothesis_params=None) -> dict:  # fmt: skip
     """One log's row of :func:`~stucco_drake.eval.target_estimates.score_estimates` for
@@ -148,9 +147,12 @@ def run_estimates(args: argparse.Namespace) -> int:
 
     out = Path(args.table)
     scales, suffix = _motion_scales(args.motion_scales)
-    hypothesis_params, params_suffix = _hypothesis_params(args.hypothesis_params)
-    suffix += params_suffix
-    dx_model, params, stream = _table_settings(out)
+    hypothesis_params, _ = hypothesis_settings_of(args.hypothesis_params)
+    dx_model, params, stream, recorded = _table_settings(out)
+    if hypothesis_params is None:  # the table's own, as its grasps were made with
+        hypothesis_params = recorded
+    else:
+        suffix += "_" + Path(args.hypothesis_params).stem
     paths = sorted((out / "logs").glob("*.npz"))
     if not paths:
         raise InputError(f"--table {out}: no episode logs in {out / 'logs'}")

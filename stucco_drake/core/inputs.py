@@ -144,3 +144,18 @@ def policy_settings_of(policy: str, path, settings_classes: Mapping):
     default = settings_classes[policy]()
     settings = read_settings("--policy-params", path, default)
     return settings, settings_changes(settings, default)
+
+
+def hypothesis_settings_of(path):
+    """(settings, how they differ from the defaults) of the target-pose hypotheses
+    (:class:`~stucco_drake.core.hypothesis_params.HypothesisParams`) with the overrides of
+    the YAML file given to ``--hypothesis-params`` at ``path``; (None, {}) for None, the
+    estimator's defaults. InputError (one line) for a missing file or a bad key or value."""
+    if path is None:
+        return None, {}
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+    from stucco_drake.core.settings import settings_changes
+
+    default = HypothesisParams()
+    settings = read_settings("--hypothesis-params", path, default)
+    return settings, settings_changes(settings, default)

@@ -22,6 +22,7 @@ from stucco_drake.core.baselines import TRACKER_NAMES
 from stucco_drake.core.contact_motion import DX_MODELS, DX_MODELS_SUMMARY
 from stucco_drake.core.inputs import (
     InputError,
+    hypothesis_settings_of,
     non_negative_int,
     policy_settings_of,
     positive_int,
@@ -146,14 +147,16 @@ TABLE_CONFIG = "table_config.yaml"
 
 def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingParams | None,
                        filter_stream: int = 0, target_estimator: str = "rules",
-                       policy: str = "prescribed",
-                       policy_params: Mapping | None = None) -> None:  # fmt: skip
+                       policy: str = "prescribed", policy_params: Mapping | None = None,
+                       hypothesis_params: Mapping | None = None) -> None:  # fmt: skip
     """Records in ``OUT/table_config.yaml`` the contact motion, STUCCO's full parameters
     (Table I when None), the filter stream, the target estimator of the grasps, the
     policy that chose the actions and how its settings differ from their defaults
-    (``policy_params``, plain values; None: they do not) the rows of ``out`` are made with,
-    or, when the file exists, checks that they are the same: rows are keyed by scene, seed
-    and method only, so rows of two settings in one folder would pass for each other.
+    (``policy_params``, plain values; None: they do not) and how the target pose
+    estimator's differ from theirs (``hypothesis_params``, likewise) the rows of ``out`` are
+    made with, or, when the file exists, checks that they are the same: rows are keyed by
+    scene, seed and method only, so rows of two settings in one folder would pass for each
+    other. A file written before a setting existed counts at that setting's default.
     ValueError naming the first setting that differs."""
     def plain(mapping):  # as YAML reads it back: lists, plain floats
         return yaml.safe_load(yaml.safe_dump(mapping))
@@ -162,7 +165,8 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
     config = plain({"dx_model": dx_model, "stucco_params": params.to_mapping(),
                     "filter_stream": int(filter_stream),
                     "target_estimator": target_estimator, "policy": policy,
-                    "policy_params": dict(policy_params or {})})  # fmt: skip
+                    "policy_params": dict(policy_params or {}),
+                    "hypothesis_params": dict(hypothesis_params or {})})  # fmt: skip
     path = Path(out) / TABLE_CONFIG
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -178,7 +182,7 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
             or not isinstance(recorded["stucco_params"], dict)):  # fmt: skip
         raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params"
                          f" and optionally filter_stream, target_estimator, policy, "
-                         f"policy_params)")
+                         f"policy_params, hypothesis_params)")
     # What a file written before a setting existed lacks counts at that setting's default.
     old_params = {**plain(SoftTrackingParams.sim().to_mapping()), **recorded["stucco_params"]}
     settings = [("--dx-model ", recorded["dx_model"], dx_model),
@@ -187,7 +191,9 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
                  target_estimator),
                 ("--policy ", recorded.get("policy", "prescribed"), policy),
                 ("--policy-params ", recorded.get("policy_params") or {},
-                 config["policy_params"])]
+                 config["policy_params"]),
+                ("--hypothesis-params ", recorded.get("hypothesis_params") or {},
+                 config["hypothesis_params"])]
     settings += [(f"STUCCO's {name} = ", repr(old_params[name]), repr(value))
                  for name, value in config["stucco_params"].items()]  # fmt: skip
     for label, old, new in settings:
@@ -210,6 +216,7 @@ def make_table(
     target_estimator: str = "rules",
     policy: str = "prescribed",
     policy_params: Mapping | None = None,
+    hypothesis_params: Mapping | None = None,
 ) -> list[dict]:
     """Simulate, replay and tabulate seeds 0..runs-1 of every scene and method.
 
@@ -219,8 +226,9 @@ def make_table(
     the trackers take (0: seeded with the episode's seed, as the paper's tables; K: another
     stream of draws on the same episodes, see :data:`STREAM_STRIDE`); ``target_estimator``
     where the grasps are made (see :func:`replay_cached`); ``policy`` names what chose the
-    episodes' actions and ``policy_params`` how its settings differ from their defaults
-    (recorded only: ``sources`` produce them). Scenes whose sources share a
+    episodes' actions and ``policy_params`` how its settings differ from their defaults, and
+    ``hypothesis_params`` how the target pose estimator's do (both recorded only: ``sources``
+    produce and grasp with them). Scenes whose sources share a
     ``family`` (the randomized layouts of one base scene) are tabled as one column group, their
     runs pooled. Rows are keyed by
     scene, seed and method only, so an OUT folder holds one of each: :func:`check_table_config`
@@ -237,7 +245,7 @@ def make_table(
         raise ValueError(f"target_estimator: expected one of {TARGET_ESTIMATORS}, "
                          f"got {target_estimator!r}")
     check_table_config(out, dx_model, stucco_params, filter_stream, target_estimator, policy,
-                       policy_params)
+                       policy_params, hypothesis_params)
     results = RunResults(out / "runs.csv")
     replay_task = functools.partial(replay_cached, out=str(out), sources=dict(sources),
                                     dx_model=dx_model, stucco_params=stucco_params,
@@ -312,6 +320,10 @@ def add_table_command(subparsers, sources: Sources = SYNTHETIC_SOURCES, resolve=
     table.add_argument("--policy-params", metavar="SETTINGS.yaml", default=None,
                        help="the policy's settings as YAML overrides of its defaults (nested "
                             "mappings for nested settings); recorded in OUT/table_config.yaml")
+    table.add_argument("--hypothesis-params", metavar="SETTINGS.yaml", default=None,
+                       help="the target pose estimator's HypothesisParams as YAML overrides of "
+                            "its defaults, for the live estimator and the grasps (Drake scenes "
+                            "only); the changes are recorded in OUT/table_config.yaml")
     table.add_argument("--workers", type=positive_int, default=None,
                        help="parallel workers (default: one per CPU)")
     table.add_argument("--executor", choices=("process", "dask"), default="process",
@@ -334,6 +346,8 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
     policy = getattr(args, "policy", "prescribed")
     settings, changes = policy_settings_of(policy, getattr(args, "policy_params", None),
                                            policy_settings or {})
+    hypothesis_params, hypothesis_changes = hypothesis_settings_of(
+        getattr(args, "hypothesis_params", None))
     if args.scheduler is not None and args.executor != "dask":
         raise InputError("--scheduler needs --executor dask")
     try:
@@ -345,13 +359,16 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
             make = functools.partial((policies or {})[policy], settings=settings)
             sources = {**sources, **{scene: make(sources[scene], scene, stucco_params,
                                                  args.dx_model) for scene in scenes}}
+        if hypothesis_params is not None:  # wraps the policy's producer, if any
+            sources = {**sources, **{scene: sources[scene].with_hypothesis_params(
+                hypothesis_params, scene) for scene in scenes}}
     except ValueError as error:
         raise InputError(str(error)) from None
     out = prepare_output_folder("--out", args.out)
     try:
         # OUT's rows of other settings, or a runs file of another version, are refused now.
         check_table_config(out, args.dx_model, stucco_params, args.filter_stream,
-                           args.target_estimator, policy, changes)
+                           args.target_estimator, policy, changes, hypothesis_changes)
         RunResults(out / "runs.csv").rows()
         executor = make_executor(args.executor, args.workers, args.scheduler)
     except (ValueError, RuntimeError) as error:  # RuntimeError: the Dask executor without Dask
@@ -364,7 +381,7 @@ def run_table_command(args: argparse.Namespace, sources: Sources = SYNTHETIC_SOU
                               stucco_params=stucco_params,
                               filter_stream=args.filter_stream,
                               target_estimator=args.target_estimator, policy=policy,
-                              policy_params=changes)
+                              policy_params=changes, hypothesis_params=hypothesis_changes)
     except RunInterrupted as error:
         print(f"stucco-drake table: {error}", file=sys.stderr)
         return 1

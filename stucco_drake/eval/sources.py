@@ -9,6 +9,8 @@ Its callables are module-level functions, so a source can be sent to worker proc
 from __future__ import annotations
 
 import dataclasses
+import functools
+import inspect
 from collections.abc import Callable
 
 from stucco_drake.core.penetration import RobotPenetration
@@ -47,6 +49,39 @@ class EpisodeSource:
         if method == "stucco" and self.penetration is not None:
             return self.penetration(log)
         return None
+
+    def with_hypothesis_params(self, params, name: str) -> EpisodeSource:
+        """This source with ``params`` (the target pose estimator's
+        :class:`~stucco_drake.core.hypothesis_params.HypothesisParams`) given to both its
+        ``produce`` (the live estimator, which a closed-loop policy reads) and its ``grasp``
+        (the grasps after replay), as their ``hypothesis_params`` keyword; ValueError naming
+        the scene ``name`` when either cannot take it (no grasp, or not a keyword of theirs)."""
+        takes = self.grasp is not None and all(
+            _takes_hypothesis_params(f) for f in (self.produce, self.grasp)
+        )
+        if not takes:
+            raise ValueError(
+                f"--hypothesis-params: scene {name} has no target pose estimator "
+                "to set (its episodes and grasps do not take the settings)"
+            )
+        return dataclasses.replace(
+            self,
+            produce=functools.partial(self.produce, hypothesis_params=params),
+            grasp=functools.partial(self.grasp, hypothesis_params=params),
+        )
+
+
+def _takes_hypothesis_params(function) -> bool:
+    """Whether ``function`` (or a partial of it) accepts a ``hypothesis_params`` keyword."""
+    try:
+        parameters = inspect.signature(function).parameters.values()
+    except (TypeError, ValueError):  # a callable without a signature to read
+        return False
+    return any(
+        p.kind is p.VAR_KEYWORD
+        or (p.name == "hypothesis_params" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY))
+        for p in parameters
+    )
 
 
 #: The synthetic planar scenes (no Drake): no grasp.
