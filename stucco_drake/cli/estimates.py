@@ -19,7 +19,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from stucco_drake.core.inputs import InputError, hypothesis_settings_of, positive_int
+from stucco_drake.core.inputs import (
+    InputError,
+    hypothesis_settings_of,
+    positive_int,
+    probability,
+)
 
 #: Outline error (m) under which an estimate is counted as near the truth in the summary.
 NEAR = 0.02
@@ -42,6 +47,11 @@ def add_estimates_command(subparsers) -> None:
                               "hypotheses with, e.g. confidence_temperature: 3.0, instead of "
                               "the table's recorded ones; writes "
                               "estimates_<method>_<file's stem>.csv")
+    command.add_argument("--confident-from", type=probability, default=None, metavar="P",
+                         help="the confidence from which the summary counts a run as "
+                              "confident (default: the project's threshold, "
+                              "stucco_drake.eval.sets.CONFIDENT_FROM; a tempered confidence "
+                              "needs its own, chosen on development layouts)")
     command.add_argument("--workers", type=positive_int, default=1,
                          help="logs scored in parallel processes (default 1); the rows keep "
                               "the logs' order")
@@ -68,7 +78,7 @@ def _table_settings(out: Path):
         raise InputError(f"--table {out}: no readable {TABLE_CONFIG} ({error})") from None
 
 
-def _summary(rows: list[dict]) -> str:
+def _summary(rows: list[dict], confident_from: float | None = None) -> str:
     lines = ["base  n   rules near/median cm/closes   hypotheses near/median cm/closes   "
              "confidence   grasped"]
     for base in sorted({row["base"] for row in rows}):
@@ -84,23 +94,28 @@ def _summary(rows: list[dict]) -> str:
         parts.append(f"mean {confident:.2f}")
         parts.append(f"{sum(grasped)}/{len(grasped)}")
         lines.append("   ".join(parts))
-    return "\n".join([*lines, "", _calibration(rows)])
+    return "\n".join([*lines, "", _calibration(rows, confident_from)])
 
 
-def _calibration(rows: list[dict]) -> str:
+def _calibration(rows: list[dict], confident_from: float | None = None) -> str:
     """Per base scene and in all: how many runs were confident (confidence at least
-    :data:`~stucco_drake.eval.sets.CONFIDENT_FROM`) and how many of them grasped; of the
-    others, in how many the target was touched at all."""
+    ``confident_from``, None: :data:`~stucco_drake.eval.sets.CONFIDENT_FROM`) and how many of
+    them grasped; of the others, in how many the target was touched at all and how many
+    grasped anyway."""
     from stucco_drake.eval.sets import CONFIDENT_FROM
 
-    lines = [f"confident (>= {CONFIDENT_FROM}): runs, grasped   others: runs, target touched"]
+    threshold = CONFIDENT_FROM if confident_from is None else confident_from
+    lines = [f"confident (>= {threshold}): runs, grasped   "
+             "others: runs, target touched, grasped"]
     for base in [*sorted({row["base"] for row in rows}), "all"]:
         group = [row for row in rows if base in ("all", row["base"])]
-        sure = [row for row in group if row["confidence"] >= CONFIDENT_FROM]
-        rest = [row for row in group if row["confidence"] < CONFIDENT_FROM]
+        sure = [row for row in group if row["confidence"] >= threshold]
+        rest = [row for row in group if row["confidence"] < threshold]
         grasped = sum(bool(row["grasp_success"]) for row in sure)
         touched = sum(int(row["target_contacts"]) > 0 for row in rest)
-        lines.append(f"{base:<4} {len(sure):>3} {grasped:>3}   {len(rest):>3} {touched:>3}")
+        anyway = sum(bool(row["grasp_success"]) for row in rest)
+        lines.append(f"{base:<4} {len(sure):>3} {grasped:>3}   {len(rest):>3} {touched:>3} "
+                     f"{anyway:>3}")
     return "\n".join(lines)
 
 
@@ -174,6 +189,6 @@ def run_estimates(args: argparse.Namespace) -> int:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    print(_summary(rows))
+    print(_summary(rows, args.confident_from))
     print(f"{len(rows)} logs; rows in {target}")
     return 0
