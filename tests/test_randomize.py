@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 from pydrake.common.yaml import yaml_dump_typed
 
-from stucco_drake.bor.log import BOR_SOURCES, record_scene_file, table_scenes
+from stucco_drake.bor.log import BOR_SOURCES
+from stucco_drake.bor.table_sources import record_scene_file, table_scenes
 from stucco_drake.eval.cli_table import check_names
 from stucco_drake.eval.sets import (
     DEVELOPMENT_SEEDS,

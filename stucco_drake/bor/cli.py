@@ -93,8 +93,8 @@ def _grasp_hook(enabled: bool, estimator: str = "hypotheses"):
 def run_bor(args: argparse.Namespace) -> int:
     from stucco_drake.bor.diagram import build_bor_diagram
     from stucco_drake.bor.episode import run_episode
-    from stucco_drake.bor.log import POLICY_SETTINGS
     from stucco_drake.bor.policies import coverage_scene
+    from stucco_drake.bor.table_sources import POLICY_SETTINGS
     from stucco_drake.scenes import load_scene, scene_paths
     from stucco_drake.scenes.meshcat_session import save_recording, start_meshcat
 

@@ -20,8 +20,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import numpy as np
 from pydrake.systems.analysis import Simulator
@@ -37,17 +35,15 @@ from stucco_drake.bor.grasp import build_grasp_scene, estimate_clutter, grasp_at
 from stucco_drake.bor.policies import PolicySettings, coverage_scene, policy_info
 from stucco_drake.core.coverage import CoverageParams
 from stucco_drake.core.penetration import RobotPenetration
-from stucco_drake.core.probing import ProbeParams
-from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
-from stucco_drake.eval.sets import PAPER_SCENES, scene_set
+from stucco_drake.eval.sets import PAPER_SCENES
 from stucco_drake.eval.sources import EpisodeSource
 from stucco_drake.eval.target_estimates import hypotheses_estimate, rules_estimate
 from stucco_drake.robot.gripper_samples import sample_gripper_surface
 from stucco_drake.robot.gripper_sdf import gripper_penetration
 from stucco_drake.runtime import kernels
-from stucco_drake.scenes import BuiltScene, SceneFile, load_scene, resolve_scene_path, scene_paths
+from stucco_drake.scenes import BuiltScene, SceneFile, load_scene
 from stucco_drake.scenes.builder import yaw_of
 
 #: Half-width (m) of the uniform noise added to every action axis (paper Sec. V).
@@ -327,78 +323,3 @@ BOR_SOURCES = {
     name: EpisodeSource(record_episode, log_penetration, grasp_success, scene_set="paper")
     for name in BOR_SCENES
 }
-
-
-# ------------------------------------------------------------------ scene files in the table
-def record_scene_file(path: str, name: str, seed: int, **record) -> EpisodeLog:
-    """:func:`record_episode` (with ``record``'s keywords) of the scene ``path`` (a scene file
-    or a scene's name), which must be the scene ``name`` (the table's key for it)."""
-    scene = load_scene(path)
-    if scene.name != name:
-        raise ValueError(f"{path} holds scene {scene.name!r}, not {name!r}")
-    return record_episode(scene, seed, **record)
-
-
-#: The settings of each closed-loop policy ``stucco-drake table --policy`` offers besides
-#: ``prescribed`` (see :mod:`stucco_drake.bor.policies`).
-POLICY_SETTINGS = {"probe": ProbeParams, "belief": RummageParams, "sweep": CoverageParams}
-
-
-def policy_source(source: EpisodeSource, name: str, stucco_params, dx_model: str,
-                  policy: str, settings=None) -> EpisodeSource:  # fmt: skip
-    """``source`` with its episodes recorded under the policy named ``policy`` (a key of
-    :data:`POLICY_SETTINGS`) with ``settings`` (an instance of its settings class; None: the
-    defaults) (:func:`record_episode`, the live tracker STUCCO with ``stucco_params``, None:
-    the scene's, under ``dx_model``); ValueError for a scene with no target to grasp."""
-    if source.grasp is None:
-        raise ValueError(f"--policy {policy}: scene {name} has no target to grasp")
-    settings = POLICY_SETTINGS[policy]() if settings is None else settings
-    if not isinstance(settings, POLICY_SETTINGS[policy]):
-        raise ValueError(f"--policy {policy} takes {POLICY_SETTINGS[policy].__name__}, "
-                         f"not {type(settings).__name__}")
-    return dataclasses.replace(source, produce=functools.partial(
-        record_scene_file, source.scene_file or name, tracker_params=stucco_params,
-        dx_model=dx_model, policy=settings))
-
-
-#: The closed-loop policies ``stucco-drake table --policy`` offers besides ``prescribed``.
-POLICIES = {name: functools.partial(policy_source, policy=name) for name in POLICY_SETTINGS}
-
-
-def scene_file_source(path: str | Path, scene: SceneFile) -> EpisodeSource:
-    """The table's source of ``scene``, read from the file at ``path``: its episodes and
-    grasps are that file's (picklable, for worker processes)."""
-    path = str(Path(path).resolve())
-    return EpisodeSource(
-        functools.partial(record_scene_file, path), log_penetration,
-        functools.partial(grasp_success, scene=path),
-        scene_set=scene_set(scene.name, scene.base, scene.layout_seed),
-        family=scene.base if scene.layout_seed is not None else "", scene_file=path,
-    )  # fmt: skip
-
-
-def table_scenes(args: Sequence[str], sources: Mapping[str, EpisodeSource]):
-    """(scene names, sources) of the table's ``--scenes`` arguments: each is a name of
-    ``sources``, a scene file or a folder of them (every ``*.yaml`` in it, by name); a file's
-    scene is named by its ``name`` field. Other arguments are kept as names, for the table to
-    report as unknown. ValueError when two files give one name, or a file a name of
-    ``sources`` that is not that file."""
-    names, known = [], dict(sources)
-    files: dict[str, Path] = {}
-    for arg in args:
-        if arg in sources or not Path(arg).exists():
-            names.append(arg)
-            continue
-        for path in scene_paths(arg):
-            scene, path = load_scene(path), path.resolve()
-            taken = files.get(scene.name)
-            if taken is None and scene.name in known:
-                taken = resolve_scene_path(scene.name).resolve()
-            if taken is not None and taken != path:
-                raise ValueError(f"{path}: its scene {scene.name!r} is also {taken}; "
-                                 "rename one (the table keys its logs by scene name)")
-            if scene.name not in known:
-                files[scene.name] = path
-                known[scene.name] = scene_file_source(path, scene)
-            names.append(scene.name)
-    return list(dict.fromkeys(names)), known

@@ -14,7 +14,8 @@ import time
 import numpy as np
 
 from stucco_drake.bor.cli import add_diagram_command, add_run_command
-from stucco_drake.bor.log import BOR_SOURCES, POLICIES, POLICY_SETTINGS, table_scenes
+from stucco_drake.bor.log import BOR_SOURCES
+from stucco_drake.bor.table_sources import POLICIES, POLICY_SETTINGS, table_scenes
 from stucco_drake.cli.estimates import add_estimates_command
 from stucco_drake.cli.scenes import add_scenes_command
 from stucco_drake.cli.sweep import add_sweep_command
