@@ -129,6 +129,8 @@ BAD_INPUTS = {
         "--hypothesis-params {tmp}/typo.yaml: lenght: not a setting of HypothesisParams"),
     "estimates threshold > 1": ("estimates --table {tmp}/a_folder --confident-from 1.2",
                                 "argument --confident-from: must be in [0, 1], got 1.2"),
+    "estimates cut at 0 actions": ("estimates --table {tmp}/a_folder --after-actions 12 0",
+                                   "argument --after-actions: must be 1 or more, got 0"),
     "estimates scale > 1": ("estimates --table {tmp}/a_folder --motion-scales 0 1.5",
                             "--motion-scales: ", "in [0, 1], got [0.0, 1.5]"),
     "noise < 0": ("scenes noise --scenes FB --bubble-std -0.001 --out {tmp}/n",

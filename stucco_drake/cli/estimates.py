@@ -5,7 +5,11 @@ Replays a method on every log of a ``table`` output folder, at that folder's rec
 scores the segment-selection rules and the weighted hypotheses against the target's final
 pose (:func:`~stucco_drake.eval.target_estimates.score_estimates`), without simulating a grasp.
 Each row joins the table's own grasp outcome for the method (made with the rules' estimate).
-Writes ``OUT/estimates_<method>.csv`` and prints a summary per base scene.
+Writes ``OUT/estimates_<method>.csv`` and prints a summary per base scene. With
+``--after-actions``, each log is cut after each of the given action counts
+(:meth:`~stucco_drake.eval.episode_log.EpisodeLog.first`) and scored against the target's pose
+there: would a policy stopping at that count have grasped? (Each cut is replayed from the start
+with the table's filter stream, so it is the grasp's estimate at that point.)
 """
 
 from __future__ import annotations
@@ -52,6 +56,11 @@ def add_estimates_command(subparsers) -> None:
                               "confident (default: the project's threshold, "
                               "stucco_drake.eval.sets.CONFIDENT_FROM; a tempered confidence "
                               "needs its own, chosen on development layouts)")
+    command.add_argument("--after-actions", nargs="+", type=positive_int, default=None,
+                         metavar="K",
+                         help="score each log cut after each K actions (a log with fewer is "
+                              "left out at that K) against the target's pose there, instead "
+                              "of the whole episode; writes estimates_<method>_after_<K...>.csv")
     command.add_argument("--workers", type=positive_int, default=1,
                          help="logs scored in parallel processes (default 1); the rows keep "
                               "the logs' order")
@@ -119,6 +128,41 @@ def _calibration(rows: list[dict], confident_from: float | None = None) -> str:
     return "\n".join(lines)
 
 
+def _action_counts(given, paths) -> tuple[int, ...]:
+    """The action counts to cut the logs after, in increasing order (() for none);
+    InputError when no log of ``paths`` reaches the smallest."""
+    if not given:
+        return ()
+    from stucco_drake.eval.episode_log import EpisodeLog
+
+    after = tuple(sorted(set(given)))
+    longest = max(EpisodeLog.load(path).n_actions for path in paths)
+    if after[0] > longest:
+        raise InputError(f"--after-actions: no log reaches {after[0]} actions (the longest "
+                         f"has {longest})")
+    return after
+
+
+def _cut_summary(rows: list[dict], confident_from: float | None = None) -> str:
+    """Per base scene and action count: the runs cut there, in how many the hypotheses'
+    grasp closes on the target's pose there, their mean confidence, and how many were
+    confident (at least ``confident_from``, None: the project's threshold) and closed."""
+    from stucco_drake.eval.sets import CONFIDENT_FROM
+
+    threshold = CONFIDENT_FROM if confident_from is None else confident_from
+    lines = [f"base  after  runs  closes  mean confidence  confident (>= {threshold}), closing"]
+    for base in sorted({row["base"] for row in rows}):
+        for k in sorted({row["after_actions"] for row in rows if row["base"] == base}):
+            group = [r for r in rows if r["base"] == base and r["after_actions"] == k]
+            closes = [bool(r["hypotheses_closes"]) for r in group]
+            sure = [c for c, r in zip(closes, group, strict=True)
+                    if r["confidence"] >= threshold]  # fmt: skip
+            lines.append(f"{base:<4} {k:>5} {len(group):>5} {sum(closes):>7}   "
+                         f"{np.mean([r['confidence'] for r in group]):14.2f}   "
+                         f"{len(sure):>3} {sum(sure):>3}")
+    return "\n".join(lines)
+
+
 def _motion_scales(given) -> tuple[tuple[float, ...], str]:
     """The motion scales to search and the output name's suffix for them ("" for the
     estimator's own); InputError for a scale outside [0, 1]."""
@@ -134,9 +178,11 @@ def _motion_scales(given) -> tuple[tuple[float, ...], str]:
 
 
 def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales,
-              hypothesis_params=None) -> dict:  # fmt: skip
-    """One log's row of :func:`~stucco_drake.eval.target_estimates.score_estimates` for
-    ``method`` replayed at the table's settings (runs in a worker)."""
+              hypothesis_params=None, after=None) -> list[dict]:  # fmt: skip
+    """The rows of :func:`~stucco_drake.eval.target_estimates.score_estimates` for ``method``
+    replayed at the table's settings on one log (runs in a worker): one for the whole
+    episode, or with ``after`` one per action count in it that the log reaches, each scoring
+    the log cut there (``after_actions``)."""
     from stucco_drake.bor import log as bor_log
     from stucco_drake.eval.episode_log import EpisodeLog
     from stucco_drake.eval.replay import replay
@@ -144,15 +190,21 @@ def score_log(path: Path, method: str, params, dx_model: str, stream: int, scale
 
     log = EpisodeLog.load(path)
     penetration = bor_log.log_penetration(log)
-    scored = []
+    base = log.scene.split("-L")[0]
+    cuts = [k for k in after if k <= log.n_actions] if after else [None]
+    rows = []
+    for k in cuts:
+        cut = log if k is None else log.first(k)
+        scored = []
 
-    def score(log, tracker):
-        scored.append(score_estimates(log, tracker, penetration, hypothesis_params,
-                                      scales=scales))  # fmt: skip
+        def score(replayed, tracker):
+            scored.append(score_estimates(replayed, tracker, penetration, hypothesis_params,
+                                          scales=scales))  # fmt: skip
 
-    replay(log, method, log.seed + 1000 * stream, params if method == "stucco" else None,
-           penetration=penetration, dx_model=dx_model, grasp=score)  # fmt: skip
-    return {"base": log.scene.split("-L")[0], **scored[0]}
+        replay(cut, method, log.seed + 1000 * stream, params if method == "stucco" else None,
+               penetration=penetration, dx_model=dx_model, grasp=score)  # fmt: skip
+        rows.append({"base": base, **({} if k is None else {"after_actions": k}), **scored[0]})
+    return rows
 
 
 def run_estimates(args: argparse.Namespace) -> int:
@@ -171,24 +223,31 @@ def run_estimates(args: argparse.Namespace) -> int:
     paths = sorted((out / "logs").glob("*.npz"))
     if not paths:
         raise InputError(f"--table {out}: no episode logs in {out / 'logs'}")
+    after = _action_counts(args.after_actions, paths)
+    if after:
+        suffix += "_after_" + "_".join(str(k) for k in after)
     grasped = {(row["scene"], row["seed"]): row["grasp_success"]
                for row in RunResults(out / "runs.csv").rows()
                if row["method"] == args.method}  # fmt: skip
     task = functools.partial(score_log, method=args.method, params=params, dx_model=dx_model,
                              stream=stream, scales=scales,
-                             hypothesis_params=hypothesis_params)
+                             hypothesis_params=hypothesis_params, after=after)
     rows = []
+    # A cut's row keeps the whole episode's grasp under another name: it is not the cut's.
+    joined = "episode_grasped" if after else "grasp_success"
     with make_executor("process", args.workers) as executor:
         for scored in executor.map(task, paths):
-            row = {**scored, "grasp_success": grasped.get((scored["scene"], scored["seed"]))}
-            rows.append(row)
-            print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) and not math.isnan(v)
-                           else f"{k}={v}" for k, v in row.items()), flush=True)  # fmt: skip
+            for row in scored:
+                row[joined] = grasped.get((row["scene"], row["seed"]))
+                rows.append(row)
+                print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) and not math.isnan(v)
+                               else f"{k}={v}" for k, v in row.items()), flush=True)  # fmt: skip
     target = out / f"estimates_{args.method}{suffix}.csv"
     with target.open("w", newline="", encoding="utf-8") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    print(_summary(rows, args.confident_from))
-    print(f"{len(rows)} logs; rows in {target}")
+    print(_cut_summary(rows, args.confident_from) if after
+          else _summary(rows, args.confident_from))
+    print(f"{len(rows)} rows of {len(paths)} logs in {target}")
     return 0

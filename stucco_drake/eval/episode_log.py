@@ -141,6 +141,25 @@ class EpisodeLog:
         lo, hi = self.contact_offsets[t], self.contact_offsets[t + 1]
         return self.contact_points[lo:hi], self.contact_dx[lo:hi], self.contact_object[lo:hi]
 
+    def first(self, actions: int) -> EpisodeLog:
+        """The episode as it stood after its first ``actions`` actions (1 to ``n_actions``):
+        what was sensed until then and the objects' poses at the end of action ``actions``.
+        The plant's state there was not logged, so ``final_state`` is empty (a cut cannot be
+        grasped again) and ``info["first_actions"]`` says where it was cut."""
+        if not 1 <= actions <= self.n_actions:
+            raise ValueError(f"actions: expected 1 to {self.n_actions}, got {actions}")
+        n = int(self.contact_offsets[actions])
+        cut = slice(0, n)
+        distances = self.robot_object_distance
+        return dataclasses.replace(
+            self, ee_position=self.ee_position[:actions], ee_rotation=self.ee_rotation[:actions],
+            contact_offsets=self.contact_offsets[:actions + 1],
+            contact_points=self.contact_points[cut], contact_dx=self.contact_dx[cut],
+            contact_object=self.contact_object[cut], object_poses=self.object_poses[:actions + 1],
+            robot_object_distance=distances[:actions] if len(distances) else distances,
+            final_state=np.zeros(0), info={**self.info, "first_actions": int(actions)},
+        )  # fmt: skip
+
     def final_surfaces(self) -> list[PlanarSurface]:
         """Signed distances of every object at its final pose, extruded in z (CE's surfaces)."""
         poses = self.object_poses[-1]
