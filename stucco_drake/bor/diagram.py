@@ -264,15 +264,32 @@ def build_bor_diagram(
         estimator_kwargs=dict(observer, residual_statistics=stats, sampled_plant_outputs=bool(
             scene.plant.use_sampled_output_ports)),
         threshold=threshold, isolator_kwargs={"opening": scene.gripper_start.finger_position},
-        tactile=Tactile(built.plant, built.scene_graph, bubble_bodies(built.plant),
-                        sub.GetOutputPort("contact_results"), sub.GetOutputPort("body_poses"),
-                        noise.bubble_point_std, bubble_seed),
+        tactile=_tactile(built, sub, noise.bubble_point_std, bubble_seed),
         truth=truth, truth_state=sub.GetOutputPort("plant_state"), dx_model=dx_model,
         hypothesis_params=hypothesis_params,
     )  # fmt: skip
     tracking, target, assembler = chain.tracking, chain.target_estimator, chain.assembler
     chooser = None if policy is None else add_policy(builder, sub, built, chain, policy,
                                                      penetration, shape)
+    _draw_and_export(builder, meshcat, shape, chain, chooser)
+    diagram = builder.Build()
+    diagram.set_name(f"bor_{scene.name}_{method}")
+    return BorDiagram(diagram, built, method, int(seed), scene.target, shape, penetration,
+                      chain.estimator, chain.detector, chain.isolator, chain.bubble_sensor,
+                      assembler, tracking, target, truth, chooser)  # fmt: skip
+
+
+def _tactile(built, sub, point_std: float, seed: int) -> Tactile:
+    """The bubbles' tactile sensing of the scene ``sub`` (its contact results and body
+    poses), each point with noise of ``point_std`` (m) drawn from ``seed``."""
+    return Tactile(built.plant, built.scene_graph, bubble_bodies(built.plant),
+                   sub.GetOutputPort("contact_results"), sub.GetOutputPort("body_poses"),
+                   point_std, seed)  # fmt: skip
+
+
+def _draw_and_export(builder, meshcat, shape, chain, chooser) -> None:
+    """Draws the tracking (and the policy's choices, with a ``chooser``) to ``meshcat`` if
+    any, and exports the chain's outputs but the end effector's pose."""
     if meshcat is not None:
         _add_drawing(builder, meshcat, shape, chain)
         if chooser is not None:
@@ -280,11 +297,6 @@ def build_bor_diagram(
     for name, port in chain.outputs.items():
         if name != "ee_pose":
             builder.ExportOutput(port, name)
-    diagram = builder.Build()
-    diagram.set_name(f"bor_{scene.name}_{method}")
-    return BorDiagram(diagram, built, method, int(seed), scene.target, shape, penetration,
-                      chain.estimator, chain.detector, chain.isolator, chain.bubble_sensor,
-                      assembler, tracking, target, truth, chooser)  # fmt: skip
 
 
 def _observer_settings(scene: SceneFile, h: float, gain: float, noise_seed: int):

@@ -186,6 +186,36 @@ def score(points, labels, truth_names, surfaces) -> tuple[float, float]:
     return ce, fmi
 
 
+def _play(bor: BorDiagram, simulator: Simulator, scene: SceneFile, n_actions: int,
+          on_action) -> tuple[int, list, list[int]]:  # fmt: skip
+    """Advances ``simulator`` through the first ``n_actions`` actions, or until the policy
+    stops: (actions played, (sensed point, truth) of every contact, contacts per action)."""
+    context = simulator.get_mutable_context()
+    truth, counts = [], []
+    for k in range(n_actions):
+        simulator.AdvanceTo(action_stop_time(scene, k))
+        contacts = bor.diagram.GetOutputPort("action_contacts").Eval(context)
+        if contacts.action_index != k:
+            raise RuntimeError(f"action {k}: the assembler reports {contacts.action_index}")
+        action_truth = bor.diagram.GetOutputPort("action_truth").Eval(context)
+        truth.extend((contacts.points[i], action_truth[i]) for i in range(len(contacts.points)))
+        counts.append(len(contacts.points))
+        if on_action is not None:
+            on_action(k, contacts)
+        if bor.policy is not None and bor.diagram.GetOutputPort("policy_done").Eval(context)[0]:
+            return k + 1, truth, counts  # the policy has stopped: no action k + 1
+    return n_actions, truth, counts
+
+
+def _free_body_poses(built, plant_context) -> dict[str, np.ndarray]:
+    """Each free body's pose (x, y, z, yaw) in W (m, rad), by name."""
+    poses = {}
+    for name, body in built.free_bodies.items():
+        X = body.EvalPoseInWorld(plant_context)
+        poses[name] = np.array([*X.translation(), yaw_of(X.rotation())])
+    return poses
+
+
 def run_episode(
     scene: SceneFile | str,
     method: str = "stucco",
@@ -228,21 +258,8 @@ def run_episode(
     if simulator is None:
         simulator = make_bor_simulator(bor)
     context = simulator.get_mutable_context()
-    truth, counts = [], []
     start = time.perf_counter()
-    for k in range(n_actions):
-        simulator.AdvanceTo(action_stop_time(scene, k))
-        contacts = bor.diagram.GetOutputPort("action_contacts").Eval(context)
-        if contacts.action_index != k:
-            raise RuntimeError(f"action {k}: the assembler reports {contacts.action_index}")
-        action_truth = bor.diagram.GetOutputPort("action_truth").Eval(context)
-        truth.extend((contacts.points[i], action_truth[i]) for i in range(len(contacts.points)))
-        counts.append(len(contacts.points))
-        if on_action is not None:
-            on_action(k, contacts)
-        if bor.policy is not None and bor.diagram.GetOutputPort("policy_done").Eval(context)[0]:
-            n_actions = k + 1  # the policy has stopped: no action k + 1
-            break
+    n_actions, truth, counts = _play(bor, simulator, scene, n_actions, on_action)
     wall = time.perf_counter() - start
 
     points = np.asarray(bor.diagram.GetOutputPort("map_points").Eval(context))
@@ -254,10 +271,7 @@ def run_episode(
     errors = np.array([np.linalg.norm(p - t.point) for p, t in truth])
     built = bor.scene
     plant_context = built.plant.GetMyContextFromRoot(context)
-    poses = {}
-    for name, body in built.free_bodies.items():
-        X = body.EvalPoseInWorld(plant_context)
-        poses[name] = np.array([*X.translation(), yaw_of(X.rotation())])
+    poses = _free_body_poses(built, plant_context)
     assembler_context = bor.assembler.GetMyContextFromRoot(context)
     missed = bor.assembler.assembler_state(assembler_context).detected_without_point
     detected = int(np.count_nonzero(counts)) + missed
