@@ -192,19 +192,18 @@ def score_log(path: Path, method: str, params, dx_model: str, stream: int, scale
     penetration = bor_log.log_penetration(log)
     base = log.scene.split("-L")[0]
     cuts = [k for k in after if k <= log.n_actions] if after else [None]
-    rows = []
+    scored = []
+
+    def score(replayed, tracker):
+        scored.append(score_estimates(replayed, tracker, penetration, hypothesis_params,
+                                      scales=scales))  # fmt: skip
+
     for k in cuts:
-        cut = log if k is None else log.first(k)
-        scored = []
-
-        def score(replayed, tracker):
-            scored.append(score_estimates(replayed, tracker, penetration, hypothesis_params,
-                                          scales=scales))  # fmt: skip
-
-        replay(cut, method, log.seed + 1000 * stream, params if method == "stucco" else None,
-               penetration=penetration, dx_model=dx_model, grasp=score)  # fmt: skip
-        rows.append({"base": base, **({} if k is None else {"after_actions": k}), **scored[0]})
-    return rows
+        replay(log if k is None else log.first(k), method, log.seed + 1000 * stream,
+               params if method == "stucco" else None, penetration=penetration,
+               dx_model=dx_model, grasp=score)  # fmt: skip
+    return [{"base": base, **({} if k is None else {"after_actions": k}), **row}
+            for k, row in zip(cuts, scored, strict=True)]
 
 
 def run_estimates(args: argparse.Namespace) -> int:

@@ -32,6 +32,9 @@ class HypothesisParams:
             stops saturating at 1 on poses that miss. None (the default): ``temperature``
             over the weighed hypotheses. See ``results/development/README.md``, twentieth
             look, for what 2 and 3 do on the development logs.
+        contact_location_noise: standard deviation (m) across a push of where along the
+            gripper's front a contact is sensed about where the pose would meet it
+            (:mod:`~stucco_drake.core.contact_location`); None (the default): not scored.
         min_explained: fewest contact points the chosen pose must explain for any confidence.
         n_restarts: ICP starts per proposal group.
         outline_spacing: spacing of the outline points ICP fits.
@@ -56,6 +59,7 @@ class HypothesisParams:
     free_space_scale: float = 0.002
     temperature: float = 1.0
     confidence_temperature: float | None = None
+    contact_location_noise: float | None = None
     min_explained: int = 3
     n_restarts: int = 20
     outline_spacing: float = 0.002

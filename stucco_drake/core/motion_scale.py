@@ -84,7 +84,8 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
         points = sensed + scale * (tracked - sensed)
         result = search_hypotheses(rng, points, labels, shape,
                                    spread=params.transport_noise * scale * carried,
-                                   free_space=free_space, params=params)  # fmt: skip
+                                   free_space=free_space, params=params,
+                                   carried=scale * (tracked - sensed))  # fmt: skip
         if result is not None:
             found.append((*result, np.full(len(result[0]), scale)))
     if not found:

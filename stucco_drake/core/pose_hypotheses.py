@@ -39,6 +39,7 @@ import itertools
 import numpy as np
 from scipy.spatial import cKDTree
 
+from stucco_drake.core.contact_location import location_costs_of
 from stucco_drake.core.free_space import SweptSlice, swept_configs
 from stucco_drake.core.grasp_choice import choose_grasp
 from stucco_drake.core.hypothesis_params import HypothesisParams
@@ -318,10 +319,12 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
 
 def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
                       *, spread=None, free_space: FreeSpace | None = None,
-                      params: HypothesisParams | None = None):  # fmt: skip
+                      params: HypothesisParams | None = None, carried=None):  # fmt: skip
     """The poses :func:`pose_hypotheses` weighs, with their costs and the points each explains
     ((k, 3), (k,), (k, n)), before any is left out; None when no placement can touch
-    ``min_explained`` points. Arguments and errors as :func:`pose_hypotheses`'s."""
+    ``min_explained`` points. Arguments and errors as :func:`pose_hypotheses`'s; ``carried``
+    (n, 3): how far each point was moved from where it was sensed (None: not at all), which
+    the gripper that met it is moved by too when its contact location is scored."""
     params = params or HypothesisParams()
     points = as_finite_array(points, "points", (None, 3))
     labels = np.asarray(labels)
@@ -342,11 +345,14 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
     swept = swept_slice(free_space, height, params)
     steps = None if free_space is None else np.asarray(free_space.point_steps)
 
+    located = location_costs_of(free_space, fill, points, np.zeros_like(points) if carried
+                                is None else carried, params.contact_location_noise)
+
     def scored(poses):
         poses = _distinct(poses, shape, coarse, params.fill_spacing)
         contact, explained = contact_costs(poses, points, sigma, shape, params)
         costs = contact + free_space_costs(poses, explained, swept, steps, fill, params)
-        return poses, costs, explained
+        return poses, costs + (0.0 if located is None else located(poses, explained)), explained
 
     fits = [icp_2d(rng, points[g, :2], outline, params.n_restarts).poses for g in groups]
     # The grid only ranks placements 1 cm apart: its free space is judged on a fill twice as
