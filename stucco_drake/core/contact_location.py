@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from stucco_drake.core.icp import rotations
+from stucco_drake.core.probing import gripper_footprint
 
 #: Depth (m) of the band of cross-section cells nearest ahead of the gripper that count as
 #: where it meets the target.
@@ -91,21 +92,22 @@ def location_costs_of(free, fill, points, carried, noise: float | None):
     """The function ``(poses, explained) -> (B,) costs`` of :func:`contact_location_costs`
     for the contact ``points`` (n, 3) the robot sensed at ``free``'s configs
     (:class:`~stucco_drake.core.pose_hypotheses.FreeSpace`), each carried by ``carried``
-    (n, 3) since (the gripper that met it is carried alike), the target's cross-section
+    (n, 3; None: not at all) since (the gripper that met it is carried alike), the target's
+    cross-section
     ``fill`` ((m, 2) in O); None when ``noise`` is None or no point was met by a push."""
     if noise is None or free is None or len(free.positions) == 0:
         return None
-    from stucco_drake.core.probing import gripper_footprint
-
-    sensed = np.asarray(points, dtype=np.float64) - np.asarray(carried)
+    points = np.asarray(points, dtype=np.float64)
+    carried = np.zeros_like(points) if carried is None else np.asarray(carried)
+    sensed = points - carried
     pushed, directions = push_frames(free.positions, free.point_steps, sensed)
     if not pushed.any():
         return None
     rotation = np.eye(3) if free.rotation is None else free.rotation
     footprint = gripper_footprint(free.penetration, rotation)
     steps = np.asarray(free.point_steps)[pushed]
-    grippers = (np.asarray(free.positions)[steps] + np.asarray(carried)[pushed])[:, :2]
-    met = np.asarray(points, dtype=np.float64)[pushed]
+    grippers = (np.asarray(free.positions)[steps] + carried[pushed])[:, :2]
+    met = points[pushed]
 
     def costs(poses, explained):
         return contact_location_costs(poses, np.asarray(explained)[:, pushed], fill, met,

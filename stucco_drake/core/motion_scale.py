@@ -79,13 +79,13 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
     tracked = as_finite_array(tracked, "tracked", sensed.shape)
     scales = checked_scales(scales)
     found = []
-    carried = np.hypot(*(tracked - sensed)[:, :2].T)
+    motion = tracked - sensed
+    travelled = np.hypot(*motion[:, :2].T)
     for scale in scales:
-        points = sensed + scale * (tracked - sensed)
-        result = search_hypotheses(rng, points, labels, shape,
-                                   spread=params.transport_noise * scale * carried,
+        result = search_hypotheses(rng, sensed + scale * motion, labels, shape,
+                                   spread=params.transport_noise * scale * travelled,
                                    free_space=free_space, params=params,
-                                   carried=scale * (tracked - sensed))  # fmt: skip
+                                   carried=scale * motion)  # fmt: skip
         if result is not None:
             found.append((*result, np.full(len(result[0]), scale)))
     if not found:

@@ -345,8 +345,7 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
     swept = swept_slice(free_space, height, params)
     steps = None if free_space is None else np.asarray(free_space.point_steps)
 
-    located = location_costs_of(free_space, fill, points, np.zeros_like(points) if carried
-                                is None else carried, params.contact_location_noise)
+    located = location_costs_of(free_space, fill, points, carried, params.contact_location_noise)
 
     def scored(poses):
         poses = _distinct(poses, shape, coarse, params.fill_spacing)
