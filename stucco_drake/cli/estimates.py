@@ -9,7 +9,10 @@ Writes ``OUT/estimates_<method>.csv`` and prints a summary per base scene. With
 ``--after-actions``, each log is cut after each of the given action counts
 (:meth:`~stucco_drake.eval.episode_log.EpisodeLog.first`) and scored against the target's pose
 there: would a policy stopping at that count have grasped? (Each cut is replayed from the start
-with the table's filter stream, so it is the grasp's estimate at that point.)
+with the table's filter stream, so it is the grasp's estimate at that point.) With
+``--grasp-truth``, each episode's target is also grasped in simulation at its true final pose
+(``true_pose_grasped``): what the episode's end allows a perfect estimate, so a failed grasp
+can be told apart from a wrong estimate.
 """
 
 from __future__ import annotations
@@ -61,6 +64,15 @@ def add_estimates_command(subparsers) -> None:
                          help="score each log cut after each K actions (a log with fewer is "
                               "left out at that K) against the target's pose there, instead "
                               "of the whole episode; writes estimates_<method>_after_<K...>.csv")
+    command.add_argument("--grasp-truth", action="store_true",
+                         help="also grasp each episode's target at its true final pose, from "
+                              "the logged final state (simulated, about 20 s a log): a column "
+                              "true_pose_grasped; writes estimates_<method>..._grasp_truth.csv; "
+                              "not with --after-actions (a log holds the plant's state only at "
+                              "its end)")
+    command.add_argument("--scenes", nargs="+", default=None, metavar="SCENE",
+                         help="with --grasp-truth: the scene files, or folders of them, of "
+                              "the logs' layouts (the paper's scenes are found by name)")
     command.add_argument("--workers", type=positive_int, default=1,
                          help="logs scored in parallel processes (default 1); the rows keep "
                               "the logs' order")
@@ -89,7 +101,8 @@ def _table_settings(out: Path):
 
 def _summary(rows: list[dict], confident_from: float | None = None) -> str:
     lines = ["base  n   rules near/median cm/closes   hypotheses near/median cm/closes   "
-             "confidence   grasped"]
+             "confidence   grasped" + ("   at the true pose" if "true_pose_grasped" in rows[0]
+                                           else "")]
     for base in sorted({row["base"] for row in rows}):
         group = [row for row in rows if row["base"] == base]
         parts = [f"{base:<4} {len(group):>2}"]
@@ -102,6 +115,8 @@ def _summary(rows: list[dict], confident_from: float | None = None) -> str:
         grasped = [row["grasp_success"] for row in group if row["grasp_success"] is not None]
         parts.append(f"mean {confident:.2f}")
         parts.append(f"{sum(grasped)}/{len(grasped)}")
+        if "true_pose_grasped" in group[0]:
+            parts.append(f"{sum(row['true_pose_grasped'] for row in group)}/{len(group)}")
         lines.append("   ".join(parts))
     return "\n".join([*lines, "", _calibration(rows, confident_from)])
 
@@ -143,6 +158,36 @@ def _action_counts(given, paths) -> tuple[int, ...]:
     return after
 
 
+def _truth_scenes(args: argparse.Namespace, paths, after) -> dict[str, str] | None:
+    """The scene file of each log's scene name, for ``--grasp-truth`` (None without it);
+    InputError for a scene file that does not read, a log whose scene is neither given nor
+    shipped, or ``--scenes`` / ``--after-actions`` where they do not apply."""
+    if not args.grasp_truth:
+        if args.scenes:
+            raise InputError("--scenes: only with --grasp-truth")
+        return None
+    if after:
+        raise InputError("--grasp-truth: not with --after-actions (a log holds the plant's "
+                         "state only at its end)")
+    from stucco_drake.eval.episode_log import EpisodeLog
+    from stucco_drake.scenes import SceneFileError, load_scene, resolve_scene_path, scene_paths
+
+    files = {}
+    try:
+        for arg in args.scenes or []:
+            for path in scene_paths(arg):
+                files[load_scene(path).name] = str(path.resolve())
+    except SceneFileError as error:
+        raise InputError(f"--scenes: {error}") from None
+    for name in sorted({EpisodeLog.load(path).scene for path in paths}):
+        shipped = resolve_scene_path(name)
+        if name not in files and not shipped.is_file():
+            raise InputError(f"--grasp-truth: no scene file for {name}; give it, or its "
+                             "folder, with --scenes")
+        files.setdefault(name, str(shipped))
+    return files
+
+
 def _cut_summary(rows: list[dict], confident_from: float | None = None) -> str:
     """Per base scene and action count: the runs cut there, in how many the hypotheses'
     grasp closes on the target's pose there, their mean confidence, and how many were
@@ -178,11 +223,12 @@ def _motion_scales(given) -> tuple[tuple[float, ...], str]:
 
 
 def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales,
-              hypothesis_params=None, after=None) -> list[dict]:  # fmt: skip
+              hypothesis_params=None, after=None, truth_scenes=None) -> list[dict]:  # fmt: skip
     """The rows of :func:`~stucco_drake.eval.target_estimates.score_estimates` for ``method``
     replayed at the table's settings on one log (runs in a worker): one for the whole
     episode, or with ``after`` one per action count in it that the log reaches, each scoring
-    the log cut there (``after_actions``)."""
+    the log cut there (``after_actions``). With ``truth_scenes`` (scene name -> file), the
+    whole episode's row also says whether a grasp at the target's true pose lifts it."""
     from stucco_drake.bor import log as bor_log
     from stucco_drake.eval.episode_log import EpisodeLog
     from stucco_drake.eval.replay import replay
@@ -202,6 +248,9 @@ def score_log(path: Path, method: str, params, dx_model: str, stream: int, scale
         replay(log if k is None else log.first(k), method, log.seed + 1000 * stream,
                params if method == "stucco" else None, penetration=penetration,
                dx_model=dx_model, grasp=score)  # fmt: skip
+    if truth_scenes is not None:
+        result = bor_log.grasp_true_pose(log, truth_scenes[log.scene])
+        scored[0]["true_pose_grasped"] = bool(result.success)
     return [{"base": base, **({} if k is None else {"after_actions": k}), **row}
             for k, row in zip(cuts, scored, strict=True)]
 
@@ -225,12 +274,16 @@ def run_estimates(args: argparse.Namespace) -> int:
     after = _action_counts(args.after_actions, paths)
     if after:
         suffix += "_after_" + "_".join(str(k) for k in after)
+    truth_scenes = _truth_scenes(args, paths, after)
+    if truth_scenes is not None:
+        suffix += "_grasp_truth"
     grasped = {(row["scene"], row["seed"]): row["grasp_success"]
                for row in RunResults(out / "runs.csv").rows()
                if row["method"] == args.method}  # fmt: skip
     task = functools.partial(score_log, method=args.method, params=params, dx_model=dx_model,
                              stream=stream, scales=scales,
-                             hypothesis_params=hypothesis_params, after=after)
+                             hypothesis_params=hypothesis_params, after=after,
+                             truth_scenes=truth_scenes)
     rows = []
     # A cut's row keeps the whole episode's grasp under another name: it is not the cut's.
     joined = "episode_grasped" if after else "grasp_success"
