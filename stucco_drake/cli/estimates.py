@@ -66,7 +66,7 @@ def add_estimates_command(subparsers) -> None:
                               "of the whole episode; writes estimates_<method>_after_<K...>.csv")
     command.add_argument("--grasp-truth", action="store_true",
                          help="also grasp each episode's target at its true final pose, from "
-                              "the logged final state (simulated, about 20 s a log): a column "
+                              "the logged final state (simulated, about 30 s a log): a column "
                               "true_pose_grasped; writes estimates_<method>..._grasp_truth.csv; "
                               "not with --after-actions (a log holds the plant's state only at "
                               "its end)")
