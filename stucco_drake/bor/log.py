@@ -299,7 +299,7 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
         pose, clutter = found.pose, found.unexplained_points(log.contact_points, points)
     else:
         raise ValueError(f"estimator: expected 'rules' or 'hypotheses', got {estimator!r}")
-    return _grasp_at_final_state(log, built, pose, clutter)
+    return _grasp_at_final_state(log, built, pose, clutter, shape)
 
 
 def grasp_true_pose(log: EpisodeLog, scene: str | None = None):
@@ -309,12 +309,13 @@ def grasp_true_pose(log: EpisodeLog, scene: str | None = None):
     :func:`grasp_from_log`'s; a round target is closed on along the gripper's yaw. Returns the
     :class:`~stucco_drake.bor.grasp.GraspResult`."""
     built = _grasp_scene(log.scene if scene is None else str(scene))
-    return _grasp_at_final_state(log, built, log.object_poses[-1, 0], np.zeros((0, 3)))
+    return _grasp_at_final_state(log, built, log.object_poses[-1, 0], np.zeros((0, 3)),
+                                 target_shape(built))
 
 
-def _grasp_at_final_state(log: EpisodeLog, built, pose, clutter):
-    """:func:`~stucco_drake.bor.grasp.grasp_at_pose` at ``pose`` (x, y, yaw) in the grasp
-    scene ``built``, set to the log's final plant state and time."""
+def _grasp_at_final_state(log: EpisodeLog, built, pose, clutter, shape):
+    """:func:`~stucco_drake.bor.grasp.grasp_at_pose` at ``pose`` (x, y, yaw) of the target
+    of ``shape`` in the grasp scene ``built``, set to the log's final plant state and time."""
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     context.SetTime(float(log.info.get("final_time_s", 0.0)))
@@ -322,7 +323,7 @@ def _grasp_at_final_state(log: EpisodeLog, built, pose, clutter):
         built.plant.GetMyMutableContextFromRoot(context), log.final_state
     )
     simulator.Initialize()
-    return grasp_at_pose(built, simulator, pose, clutter, target_shape(built))
+    return grasp_at_pose(built, simulator, pose, clutter, shape)
 
 
 def grasp_success(log: EpisodeLog, tracker, scene: str | None = None,
