@@ -69,6 +69,16 @@ def test_a_box_flush_against_a_can_is_not_lifted_and_the_table_says_so(tmp_path,
     assert row["scene"] == "IB-L1008" and row["true_pose_grasped"] == "False"
 
 
+def test_the_box_flush_against_a_can_is_lifted_when_approached_beyond_its_end():
+    """The same IB-L1008 end, the box gone down on beyond an end and slid along
+    (``box_approach="end"``): the open fingers pass either side of the box and the one beside
+    the can shoves it along; the box is lifted (the can's footprint overlap as above)."""
+    log = EpisodeLog.load(SOURCE / "logs" / "IB-L1008_0.npz")
+    result = grasp_true_pose(log, LAYOUTS / "IB-L1008.yaml", box_approach="end")
+    assert result.success and result.lift_height >= 0.05, result.reason
+    assert result.geometric_ok, result.reason
+
+
 def test_grasp_truth_is_refused_where_it_cannot_apply(tmp_path, capsys):
     (tmp_path / "logs").mkdir()
     shutil.copy(SOURCE / "logs" / "IB-L1008_0.npz", tmp_path / "logs")
@@ -78,7 +88,10 @@ def test_grasp_truth_is_refused_where_it_cannot_apply(tmp_path, capsys):
         (["--grasp-truth", "--after-actions", "12"],
          "--grasp-truth: not with --after-actions (a log holds the plant's state only at its "
          "end)"),
-        (["--scenes", str(LAYOUTS / "IB-L1008.yaml")], "--scenes: only with --grasp-truth"),
+        (["--regrasp", "--after-actions", "12"],
+         "--regrasp: not with --after-actions (a log holds the plant's state only at its end)"),
+        (["--scenes", str(LAYOUTS / "IB-L1008.yaml")],
+         "--scenes: only with --grasp-truth or --regrasp"),
     ):
         assert main(["estimates", "--table", str(tmp_path), *extra]) != 0
         assert capsys.readouterr().err.strip().splitlines() == [

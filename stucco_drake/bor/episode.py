@@ -44,7 +44,8 @@ def hypotheses_grasp(bor: BorDiagram, simulator: Simulator, hypotheses):
     """The grasp hook at the target-pose ``hypotheses``' chosen pose (the grasp chosen across
     them), the clutter to keep the fingers from being the points that pose does not explain,
     placed by its motion scale between where they were sensed and where they are tracked (as
-    :func:`stucco_drake.bor.log.grasp_from_log` does). Without hypotheses: False."""
+    :func:`stucco_drake.bor.log.grasp_from_log` does), a box gone down on as the estimator's
+    ``box_approach`` says. Without hypotheses: False."""
     from stucco_drake.bor.grasp import grasp_at_pose
 
     if hypotheses is None:
@@ -55,7 +56,9 @@ def hypotheses_grasp(bor: BorDiagram, simulator: Simulator, hypotheses):
     state = bor.target_estimator.estimator_state(
         bor.target_estimator.GetMyContextFromRoot(context))
     clutter = hypotheses.unexplained_points(state.sensed_points, tracked)
-    return grasp_at_pose(bor.scene, simulator, hypotheses.pose, clutter, bor.target_shape)
+    approach = bor.target_estimator.hypothesis_params.box_approach
+    return grasp_at_pose(bor.scene, simulator, hypotheses.pose, clutter, bor.target_shape,
+                         box_approach=approach)  # fmt: skip
 
 
 #: The grasp hooks of :func:`run_episode` by target-pose estimator.

@@ -27,8 +27,10 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 
+from stucco_drake.core.box_approach import box_approach_offsets
 from stucco_drake.core.grasp_choice import PAD_HALF_WIDTH, grasp_at, grasp_closes
 from stucco_drake.core.grasp_yaw import cylinder_grasp_yaws
+from stucco_drake.core.hypothesis_params import BOX_APPROACHES
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.scenes.builder import GRIPPER, IIWA, BuiltScene, build_scene, yaw_of
 from stucco_drake.scenes.scene_file import SceneFile
@@ -55,7 +57,7 @@ class GraspResult:
         reason: why it failed (or "ok"), with the numbers.
         sim_time: simulated duration of the grasp (s); wall_time: its wall-clock time (s).
         attempts: descents made (more than one when a descent was blocked and another
-            closing yaw was tried).
+            closing yaw or approach was tried).
     """
 
     success: bool
@@ -176,16 +178,28 @@ def _finger_positions(built: BuiltScene, plant_context) -> tuple[float, float]:
 
 
 def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
-                  target_shape) -> GraspResult:  # fmt: skip
+                  target_shape, *, box_approach: str = "top") -> GraspResult:  # fmt: skip
     """:func:`execute_grasp` at an estimated ``target_pose`` (x, y, yaw; m, rad, world).
 
     A cylinder is closed on first along the yaw that keeps the open fingers off ``clutter``
     ((n, 3) m, world: tracked points the estimate does not put on the target), then along the
-    other axes (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaws`).
+    other axes (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaws`). A box is gone down
+    on as ``box_approach`` says (:attr:`~stucco_drake.core.hypothesis_params.HypothesisParams.
+    box_approach`): ``"end"`` beyond an end and along it (the end whose descent keeps the
+    fingers off ``clutter`` first, then the other, then straight down when a descent is
+    blocked: :func:`~stucco_drake.core.box_approach.box_approach_offsets`), ``"top"`` straight.
     """
     context = simulator.get_context()
     X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
     x, y, yaw = (float(v) for v in target_pose)
+    if box_approach not in BOX_APPROACHES:
+        raise ValueError(f"box_approach: expected one of {BOX_APPROACHES}, got {box_approach!r}")
+    if isinstance(target_shape, BoxSdf) and box_approach == "end":
+        centre = grasp_at(np.array([x, y, yaw]), target_shape)[0, :2]
+        offsets = box_approach_offsets((*centre, yaw), target_shape.half_extents, clutter,
+                                       X_WG.translation()[:2])  # fmt: skip
+        return execute_grasp(built, simulator, (x, y, yaw), target_shape,
+                             approach_offsets=offsets)  # fmt: skip
     yaws = cylinder_grasp_yaws((x, y), clutter, yaw_of(X_WG.rotation()))
     return execute_grasp(built, simulator, (x, y, yaw), target_shape, cylinder_yaws=yaws)
 
@@ -228,7 +242,8 @@ def _grasp_context(built: BuiltScene, simulator: Simulator):
 
 
 def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_shape, *,
-                  min_lift: float = 0.05, cylinder_yaws=None) -> GraspResult:
+                  min_lift: float = 0.05, cylinder_yaws=None,
+                  approach_offsets=None) -> GraspResult:  # fmt: skip
     """Grasps at ``target_pose`` (RigidTransform X_WO or (x, y, yaw); m, rad, world) a target of
     ``target_shape`` (BoxSdf / CylinderSdf in the target's frame) and lifts it 10 cm.
 
@@ -239,7 +254,9 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     grasped at any yaw: ``cylinder_yaws`` (rad, world; default the gripper's current yaw alone)
     are the closing yaws to try in turn, e.g. so the open fingers (0.2 m across, plates
     included) miss known clutter; the next is tried when a descent is blocked (see
-    :class:`GraspExecutor`). A box is closed on across its short side only.
+    :class:`GraspExecutor`). A box is closed on across its short side only; its
+    ``approach_offsets`` ((k, 2) m, world; default straight down alone) are where the attempts
+    descend, in turn, from the grasp point before sliding to it (see :class:`GraspExecutor`).
     A target that is not between the fingers once they have closed fails there: the lift and
     hold are not simulated (``sim_time`` is then shorter).
     """
@@ -259,16 +276,20 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     X_WG = built.gripper_frame().CalcPoseInWorld(plant_context)
     yaws = [yaw_of(X_WG.rotation())] if cylinder_yaws is None else list(cylinder_yaws)
     x, y, yaw, z_grasp = grasp_pose(target_pose, target_shape, yaws[0])
-    retry_yaws = yaws[1:] if isinstance(target_shape, CylinderSdf) else ()
+    retry_yaws, offsets = yaws[1:] if isinstance(target_shape, CylinderSdf) else (), None
+    if isinstance(target_shape, BoxSdf) and approach_offsets is not None:
+        offsets = np.asarray(approach_offsets, dtype=np.float64).reshape(-1, 2)
+        retry_yaws = [yaw] * (len(offsets) - 1)
     executor_context = executor.GetMyMutableContextFromRoot(context)
-    executor.start(executor_context, (x, y), yaw, SAFE_HEIGHT, z_grasp, retry_yaws=retry_yaws)
+    executor.start(executor_context, (x, y), yaw, SAFE_HEIGHT, z_grasp, retry_yaws=retry_yaws,
+                   approach_offsets=offsets)  # fmt: skip
     t0, wall0 = context.get_time(), time.perf_counter()
 
     # A blocked descent starts a new attempt, which restarts the phase clock.
     attempt = -1
     while attempt != executor.attempt(executor_context)[0]:
         attempt, t_attempt = executor.attempt(executor_context)
-        simulator.AdvanceTo(t_attempt + executor.phase_end("close"))
+        simulator.AdvanceTo(t_attempt + executor.phase_end(executor_context, "close"))
     plant_context = plant.GetMyContextFromRoot(context)
     geometric_ok, geometry = geometric_check(
         target.EvalPoseInWorld(plant_context),
@@ -280,7 +301,7 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
                                 target.EvalPoseInWorld(plant_context).translation(),
                                 _finger_positions(built, plant_context))
     if closed_on:
-        simulator.AdvanceTo(t_attempt + executor.total_duration)
+        simulator.AdvanceTo(t_attempt + executor.total_duration(executor_context))
     plant_context = plant.GetMyContextFromRoot(context)
     X_WO = target.EvalPoseInWorld(plant_context)
     X_WG = built.gripper_frame().CalcPoseInWorld(plant_context)

@@ -34,6 +34,7 @@ from stucco_drake.bor.episode import make_bor_simulator, run_episode
 from stucco_drake.bor.grasp import build_grasp_scene, estimate_clutter, grasp_at_pose
 from stucco_drake.bor.policies import PolicySettings, coverage_scene, policy_info
 from stucco_drake.core.coverage import CoverageParams
+from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
@@ -275,7 +276,8 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
     * ``"hypotheses"``: the grasp chosen across weighted pose hypotheses
       (:func:`~stucco_drake.eval.target_estimates.hypotheses_estimate`, with
       ``hypothesis_params``; None: the defaults); a round target is closed on away from the
-      points the grasped pose does not explain.
+      points the grasped pose does not explain, a box gone down on as their ``box_approach``
+      says.
 
     The grasp then runs in a freshly built grasp scene set to the logged plant state, that of
     ``scene`` (a scene name or file; default: the shipped scene named ``log.scene``). Returns
@@ -297,25 +299,33 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
         if found is None:
             return None
         pose, clutter = found.pose, found.unexplained_points(log.contact_points, points)
+        approach = (hypothesis_params or HypothesisParams()).box_approach
+        return _grasp_at_final_state(log, built, pose, clutter, shape, box_approach=approach)
     else:
         raise ValueError(f"estimator: expected 'rules' or 'hypotheses', got {estimator!r}")
     return _grasp_at_final_state(log, built, pose, clutter, shape)
 
 
-def grasp_true_pose(log: EpisodeLog, scene: str | None = None):
+def grasp_true_pose(log: EpisodeLog, scene: str | None = None, *, box_approach: str = "top"):
     """Grasp the target at its true final pose, from the logged final state: the grasp any
     estimator would make were its estimate exact, so what the episode's end allows (a target
     flush against clutter can fail here: a finger lands on the neighbour). ``scene`` as
-    :func:`grasp_from_log`'s; a round target is closed on along the gripper's yaw. Returns the
+    :func:`grasp_from_log`'s; a round target is closed on along the gripper's yaw, a box gone
+    down on as ``box_approach`` says (:func:`~stucco_drake.bor.grasp.grasp_at_pose`; with
+    ``"end"`` the fingers kept off the contacts sensed on other objects, what an exact
+    estimate leaves unexplained). Returns the
     :class:`~stucco_drake.bor.grasp.GraspResult`."""
     built = _grasp_scene(log.scene if scene is None else str(scene))
-    return _grasp_at_final_state(log, built, log.object_poses[-1, 0], np.zeros((0, 3)),
-                                 target_shape(built))
+    clutter = log.contact_points[log.contact_object > 0] if box_approach == "end" \
+        else np.zeros((0, 3))
+    return _grasp_at_final_state(log, built, log.object_poses[-1, 0], clutter,
+                                 target_shape(built), box_approach=box_approach)
 
 
-def _grasp_at_final_state(log: EpisodeLog, built, pose, clutter, shape):
+def _grasp_at_final_state(log: EpisodeLog, built, pose, clutter, shape, **grasp_kwargs):
     """:func:`~stucco_drake.bor.grasp.grasp_at_pose` at ``pose`` (x, y, yaw) of the target
-    of ``shape`` in the grasp scene ``built``, set to the log's final plant state and time."""
+    of ``shape`` in the grasp scene ``built``, set to the log's final plant state and time
+    (``grasp_kwargs`` go to it)."""
     simulator = Simulator(built.diagram)
     context = simulator.get_mutable_context()
     context.SetTime(float(log.info.get("final_time_s", 0.0)))
@@ -323,7 +333,7 @@ def _grasp_at_final_state(log: EpisodeLog, built, pose, clutter, shape):
         built.plant.GetMyMutableContextFromRoot(context), log.final_state
     )
     simulator.Initialize()
-    return grasp_at_pose(built, simulator, pose, clutter, shape)
+    return grasp_at_pose(built, simulator, pose, clutter, shape, **grasp_kwargs)
 
 
 def grasp_success(log: EpisodeLog, tracker, scene: str | None = None,

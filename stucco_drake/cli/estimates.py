@@ -70,9 +70,16 @@ def add_estimates_command(subparsers) -> None:
                               "true_pose_grasped; writes estimates_<method>..._grasp_truth.csv; "
                               "not with --after-actions (a log holds the plant's state only at "
                               "its end)")
+    command.add_argument("--regrasp", action="store_true",
+                         help="also grasp again at the hypotheses' chosen pose, from the "
+                              "logged final state, with --hypothesis-params's settings (or "
+                              "the table's), e.g. box_approach: end: a column regrasped; "
+                              "writes estimates_<method>..._regrasp.csv; not with "
+                              "--after-actions")
     command.add_argument("--scenes", nargs="+", default=None, metavar="SCENE",
-                         help="with --grasp-truth: the scene files, or folders of them, of "
-                              "the logs' layouts (the paper's scenes are found by name)")
+                         help="with --grasp-truth or --regrasp: the scene files, or folders "
+                              "of them, of the logs' layouts (the paper's scenes are found by "
+                              "name)")
     command.add_argument("--workers", type=positive_int, default=1,
                          help="logs scored in parallel processes (default 1); the rows keep "
                               "the logs' order")
@@ -101,8 +108,9 @@ def _table_settings(out: Path):
 
 def _summary(rows: list[dict], confident_from: float | None = None) -> str:
     lines = ["base  n   rules near/median cm/closes   hypotheses near/median cm/closes   "
-             "confidence   grasped" + ("   at the true pose" if "true_pose_grasped" in rows[0]
-                                           else "")]
+             "confidence   grasped"
+             + ("   at the true pose" if "true_pose_grasped" in rows[0] else "")
+             + ("   regrasped" if "regrasped" in rows[0] else "")]
     for base in sorted({row["base"] for row in rows}):
         group = [row for row in rows if row["base"] == base]
         parts = [f"{base:<4} {len(group):>2}"]
@@ -115,8 +123,9 @@ def _summary(rows: list[dict], confident_from: float | None = None) -> str:
         grasped = [row["grasp_success"] for row in group if row["grasp_success"] is not None]
         parts.append(f"mean {confident:.2f}")
         parts.append(f"{sum(grasped)}/{len(grasped)}")
-        if "true_pose_grasped" in group[0]:
-            parts.append(f"{sum(row['true_pose_grasped'] for row in group)}/{len(group)}")
+        for column in ("true_pose_grasped", "regrasped"):
+            if column in group[0]:
+                parts.append(f"{sum(row[column] for row in group)}/{len(group)}")
         lines.append("   ".join(parts))
     return "\n".join([*lines, "", _calibration(rows, confident_from)])
 
@@ -159,16 +168,18 @@ def _action_counts(given, paths) -> tuple[int, ...]:
 
 
 def _truth_scenes(args: argparse.Namespace, paths, after) -> dict[str, str] | None:
-    """The scene file of each log's scene name, for ``--grasp-truth`` (None without it);
-    InputError for a scene file that does not read, a log whose scene is neither given nor
-    shipped, or ``--scenes`` / ``--after-actions`` where they do not apply."""
-    if not args.grasp_truth:
+    """The scene file of each log's scene name, for ``--grasp-truth`` and ``--regrasp``
+    (None without either); InputError for a scene file that does not read, a log whose scene
+    is neither given nor shipped, or ``--scenes`` / ``--after-actions`` where they do not
+    apply."""
+    if not (args.grasp_truth or args.regrasp):
         if args.scenes:
-            raise InputError("--scenes: only with --grasp-truth")
+            raise InputError("--scenes: only with --grasp-truth or --regrasp")
         return None
+    flag = "--grasp-truth" if args.grasp_truth else "--regrasp"
     if after:
-        raise InputError("--grasp-truth: not with --after-actions (a log holds the plant's "
-                         "state only at its end)")
+        raise InputError(f"{flag}: not with --after-actions (a log holds the plant's state "
+                         "only at its end)")
     from stucco_drake.eval.episode_log import EpisodeLog
     from stucco_drake.scenes import SceneFileError, load_scene, resolve_scene_path, scene_paths
 
@@ -182,7 +193,7 @@ def _truth_scenes(args: argparse.Namespace, paths, after) -> dict[str, str] | No
     for name in sorted({EpisodeLog.load(path).scene for path in paths}):
         shipped = resolve_scene_path(name)
         if name not in files and not shipped.is_file():
-            raise InputError(f"--grasp-truth: no scene file for {name}; give it, or its "
+            raise InputError(f"{flag}: no scene file for {name}; give it, or its "
                              "folder, with --scenes")
         files.setdefault(name, str(shipped))
     return files
@@ -223,13 +234,17 @@ def _motion_scales(given) -> tuple[tuple[float, ...], str]:
 
 
 def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales,
-              hypothesis_params=None, after=None, truth_scenes=None) -> list[dict]:  # fmt: skip
+              hypothesis_params=None, after=None, truth_scenes=None,
+              grasp_truth: bool = True, regrasp: bool = False) -> list[dict]:  # fmt: skip
     """The rows of :func:`~stucco_drake.eval.target_estimates.score_estimates` for ``method``
     replayed at the table's settings on one log (runs in a worker): one for the whole
     episode, or with ``after`` one per action count in it that the log reaches, each scoring
     the log cut there (``after_actions``). With ``truth_scenes`` (scene name -> file), the
-    whole episode's row also says whether a grasp at the target's true pose lifts it."""
+    whole episode's row also says whether a grasp at the target's true pose lifts it
+    (``grasp_truth``) and whether one at the hypotheses' chosen pose does (``regrasp``), a
+    box gone down on as the hypotheses' settings say (``box_approach``)."""
     from stucco_drake.bor import log as bor_log
+    from stucco_drake.core.hypothesis_params import HypothesisParams
     from stucco_drake.eval.episode_log import EpisodeLog
     from stucco_drake.eval.replay import replay
     from stucco_drake.eval.target_estimates import score_estimates
@@ -243,13 +258,18 @@ def score_log(path: Path, method: str, params, dx_model: str, stream: int, scale
     def score(replayed, tracker):
         scored.append(score_estimates(replayed, tracker, penetration, hypothesis_params,
                                       scales=scales))  # fmt: skip
+        if regrasp:  # the whole episode only (refused with --after-actions)
+            result = bor_log.grasp_from_log(log, tracker, truth_scenes[log.scene],
+                                            "hypotheses", hypothesis_params)  # fmt: skip
+            scored[-1]["regrasped"] = bool(result is not None and result.success)
 
     for k in cuts:
         replay(log if k is None else log.first(k), method, log.seed + 1000 * stream,
                params if method == "stucco" else None, penetration=penetration,
                dx_model=dx_model, grasp=score)  # fmt: skip
-    if truth_scenes is not None:
-        result = bor_log.grasp_true_pose(log, truth_scenes[log.scene])
+    if truth_scenes is not None and grasp_truth:
+        approach = (hypothesis_params or HypothesisParams()).box_approach
+        result = bor_log.grasp_true_pose(log, truth_scenes[log.scene], box_approach=approach)
         scored[0]["true_pose_grasped"] = bool(result.success)
     return [{"base": base, **({} if k is None else {"after_actions": k}), **row}
             for k, row in zip(cuts, scored, strict=True)]
@@ -275,15 +295,16 @@ def run_estimates(args: argparse.Namespace) -> int:
     if after:
         suffix += "_after_" + "_".join(str(k) for k in after)
     truth_scenes = _truth_scenes(args, paths, after)
-    if truth_scenes is not None:
-        suffix += "_grasp_truth"
+    suffix += "_grasp_truth" if args.grasp_truth else ""
+    suffix += "_regrasp" if args.regrasp else ""
     grasped = {(row["scene"], row["seed"]): row["grasp_success"]
                for row in RunResults(out / "runs.csv").rows()
                if row["method"] == args.method}  # fmt: skip
     task = functools.partial(score_log, method=args.method, params=params, dx_model=dx_model,
                              stream=stream, scales=scales,
                              hypothesis_params=hypothesis_params, after=after,
-                             truth_scenes=truth_scenes)
+                             truth_scenes=truth_scenes, grasp_truth=args.grasp_truth,
+                             regrasp=args.regrasp)
     rows = []
     # A cut's row keeps the whole episode's grasp under another name: it is not the cut's.
     joined = "episode_grasped" if after else "grasp_success"

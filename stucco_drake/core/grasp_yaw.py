@@ -39,7 +39,7 @@ def cylinder_grasp_yaw(
         obstacle_points: (n, 2 or 3) points on other objects (m, world; z ignored).
         current_yaw: the gripper's yaw now (rad).
     """
-    centre, points = _checked(centre_xy, obstacle_points)
+    centre, points = checked_obstacles(centre_xy, obstacle_points)
     if len(points) == 0:
         return float(current_yaw)
     yaws = float(current_yaw) + np.pi * np.arange(n_yaws) / n_yaws
@@ -68,14 +68,15 @@ def cylinder_grasp_yaws(
     first = cylinder_grasp_yaw(centre_xy, obstacle_points, current_yaw,
                                finger_offset=finger_offset, **kwargs)  # fmt: skip
     others = first + np.pi * np.arange(1, n_axes) / n_axes
-    centre, points = _checked(centre_xy, obstacle_points)
+    centre, points = checked_obstacles(centre_xy, obstacle_points)
     if len(points):
         others = others[np.argsort(-_clearance(centre, points, others, finger_offset),
                                    kind="stable")]  # fmt: skip
     return np.concatenate([[first], others])
 
 
-def _checked(centre_xy, obstacle_points) -> tuple[np.ndarray, np.ndarray]:
+def checked_obstacles(centre_xy, obstacle_points) -> tuple[np.ndarray, np.ndarray]:
+    """(centre (2,), obstacle points (n, 2)) checked finite, z dropped (m, world)."""
     centre = as_finite_array(centre_xy, "centre_xy", (2,))
     points = np.asarray(obstacle_points, dtype=np.float64)
     if points.size == 0:

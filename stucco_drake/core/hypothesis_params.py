@@ -6,6 +6,9 @@ import dataclasses
 
 import numpy as np
 
+#: How the grasp of a box goes down (:attr:`HypothesisParams.box_approach`).
+BOX_APPROACHES = ("top", "end")
+
 
 @dataclasses.dataclass(frozen=True)
 class HypothesisParams:
@@ -50,6 +53,10 @@ class HypothesisParams:
         grasp_margin, grasp_angle_margin: how much to spare (m, rad) a grasp needs to count
             as closing under a hypothesis when the grasp is chosen and its confidence formed
             (:func:`~stucco_drake.core.grasp_choice.choose_grasp`).
+        box_approach: how the grasp of a box goes down: ``"top"`` straight onto the grasp
+            point; ``"end"`` beyond the end whose descent keeps the open fingers off the
+            clutter felt, then sliding along the box to the grasp point (the other end, then
+            straight down, when a descent is blocked: :mod:`~stucco_drake.core.box_approach`).
     """
 
     contact_noise: float = 0.004
@@ -73,3 +80,9 @@ class HypothesisParams:
     raster_resolution: float = 0.0025
     grasp_margin: float = 0.01
     grasp_angle_margin: float = np.radians(5.0)
+    box_approach: str = "top"
+
+    def __post_init__(self):
+        if self.box_approach not in BOX_APPROACHES:
+            raise ValueError(f"box_approach: expected one of {', '.join(BOX_APPROACHES)}, "
+                             f"got {self.box_approach!r}")

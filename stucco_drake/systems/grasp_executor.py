@@ -11,14 +11,19 @@ clock, the phases listed in :data:`PHASES`:
 2. ``open``: open both fingers fully;
 3. ``transit``: move above the grasp point while turning (yaw) to the grasp orientation; the
    height reaches the safe height halfway, so the gripper climbs before it passes over things;
-4. ``descend``: go straight down to the grasp height. The descent is guarded: when the
+4. ``descend``: go straight down to the grasp height, above the grasp point or, for an
+   attempt given an approach offset, that far from it. The descent is guarded: when the
    measured gripper height trails the reference by more than ``block_tolerance`` (a finger has
-   landed on something), and :meth:`GraspExecutor.start` was given retry yaws, the sequence
-   starts again from ``raise`` at the measured pose with the next yaw (a new attempt);
-5. ``close``: close the fingers (see ``close_position``: a command beyond the closed stop, so the
+   landed on something), and :meth:`GraspExecutor.start` was given more attempts, the sequence
+   starts again from ``raise`` at the measured pose with the next one (its yaw and offset);
+5. ``slide``: at the grasp height, slide from where the descent ended to the grasp point, the
+   open fingers either side of the target (a box approached along its long axis from beyond
+   an end: the fingers shove aside what stands beside its long faces, where a descent from
+   above would land on it). An attempt without an offset skips it (it lasts 0 s);
+6. ``close``: close the fingers (see ``close_position``: a command beyond the closed stop, so the
    joint controller keeps squeezing once the bubbles touch the object);
-6. ``lift``: raise the gripper by ``lift``;
-7. ``hold``: hold still so the object settles (or slips) before the caller measures.
+7. ``lift``: raise the gripper by ``lift``;
+8. ``hold``: hold still so the object settles (or slips) before the caller measures.
 
 Each phase follows a minimum-jerk profile between two gripper-frame poses (x, y, z, yaw; m, rad,
 world frame; the gripper points down, see ``gripper_rotation``) and differential IK on the full
@@ -45,24 +50,26 @@ from stucco_drake.systems.planar_controller import (
     solve_start_ik,
 )
 
-PHASES = ("raise", "open", "transit", "descend", "close", "lift", "hold")
-#: Default phase durations (s), same order as PHASES.
-DURATIONS = (1.5, 0.6, 2.5, 2.0, 1.2, 2.0, 0.7)
+PHASES = ("raise", "open", "transit", "descend", "slide", "close", "lift", "hold")
+#: Default phase durations (s), same order as PHASES (``slide`` only when there is one).
+DURATIONS = (1.5, 0.6, 2.5, 2.0, 2.0, 1.2, 2.0, 0.7)
 #: Damping of the IK pseudo-inverse (m, rad); only matters near singular postures.
 _DAMPING = 1e-3
 #: Gain (1/s) of the null-space pull towards the posture at start (one redundant DoF).
 _NULL_GAIN = 2.0
-#: Most yaws one grasp tries (the first and its retries).
+#: Most attempts one grasp makes (the first and its retries).
 MAX_ATTEMPTS = 4
 # State layout: mode, t0 (of the current attempt), q_cmd (7), then the plan: start (x, y, z,
 # yaw), grasp (x, y, yaw), z_safe, z_grasp, finger position at start, q_nominal (7), the height
-# the raise phase reaches, the attempt's index, the number of yaws, the yaws to try.
+# the raise phase reaches, the attempt's index, the number of attempts, their yaws, their
+# approach offsets (x, y each).
 _MODE, _T0, _Q = 0, 1, slice(2, 9)
 _START, _GRASP, _ZS, _ZG, _F0, _QN = slice(9, 13), slice(13, 16), 16, 17, 18, slice(19, 26)
 _GRASP_YAW = _GRASP.stop - 1
 _ZR, _ATTEMPT, _N_YAWS, _YAWS = 26, 27, 28, slice(29, 29 + MAX_ATTEMPTS)
-_N_STATE = 29 + MAX_ATTEMPTS
-_DESCEND = PHASES.index("descend")
+_OFFSETS = slice(_YAWS.stop, _YAWS.stop + 2 * MAX_ATTEMPTS)
+_N_STATE = _OFFSETS.stop
+_DESCEND, _SLIDE = PHASES.index("descend"), PHASES.index("slide")
 
 
 def _min_jerk(s: float) -> tuple[float, float]:
@@ -102,7 +109,6 @@ class GraspExecutor(LeafSystem):
         self._durations = np.asarray(durations, dtype=float)
         if len(self._durations) != len(PHASES):
             raise ValueError(f"need {len(PHASES)} durations")
-        self._ends = np.cumsum(self._durations)
         arm_joints = set(self._kin.q_index)
         fingers = [robot_plant.get_joint(j) for j in robot_plant.GetJointIndices()]
         fingers = [j for j in fingers if j.num_positions() == 1
@@ -124,19 +130,19 @@ class GraspExecutor(LeafSystem):
         self.DeclareVectorOutputPort("grasp_phase", 1, self.calc_grasp_phase,
                                      prerequisites_of_calc=state | {self.time_ticket()})
 
-    @property
-    def total_duration(self) -> float:
-        """Time (s) from the start of an attempt (see :meth:`attempt`) to the end of the last
-        phase."""
-        return float(self._ends[-1])
+    def total_duration(self, context) -> float:
+        """Time (s) from the start of the current attempt (see :meth:`attempt`) on this
+        system's ``context`` to the end of the last phase."""
+        return float(self._ends_of(context.get_discrete_state(self._state).value())[0][-1])
 
-    def phase_end(self, name: str) -> float:
-        """Time (s) from the start of an attempt (see :meth:`attempt`) to the end of phase
-        ``name``."""
-        return float(self._ends[PHASES.index(name)])
+    def phase_end(self, context, name: str) -> float:
+        """Time (s) from the start of the current attempt (see :meth:`attempt`) on this
+        system's ``context`` to the end of phase ``name``."""
+        ends = self._ends_of(context.get_discrete_state(self._state).value())[0]
+        return float(ends[PHASES.index(name)])
 
     def start(self, context, grasp_xy, grasp_yaw: float, z_safe: float, z_grasp: float,
-              retry_yaws=()):
+              retry_yaws=(), approach_offsets=None):
         """Arms the sequence on this system's ``context``, from the measured robot state.
 
         Args:
@@ -145,18 +151,27 @@ class GraspExecutor(LeafSystem):
                 (mod pi, the fingers are symmetric) nearest the current one is used.
             z_safe: height of the gripper frame for the transit (m, world).
             z_grasp: height of the gripper frame when closing (m, world).
-            retry_yaws: closing yaws (rad, world) to try in turn after a blocked descent, at
-                most ``MAX_ATTEMPTS - 1``; without them a blocked descent keeps pressing on.
+            retry_yaws: closing yaws (rad, world) of the attempts after a blocked descent,
+                at most ``MAX_ATTEMPTS - 1``; without them a blocked descent keeps pressing on.
+            approach_offsets: per attempt (the first, then one per retry yaw), the offset
+                (dx, dy) (m, world) from ``grasp_xy`` where it descends before sliding to
+                ``grasp_xy`` (``slide``); None: every attempt descends onto ``grasp_xy``.
         """
         yaws = [float(grasp_yaw), *(float(y) for y in retry_yaws)]
         if len(yaws) > MAX_ATTEMPTS or not np.all(np.isfinite(yaws)):
             raise ValueError(f"need 1 to {MAX_ATTEMPTS} finite grasp yaws, got {yaws}")
+        offsets = np.zeros((len(yaws), 2)) if approach_offsets is None \
+            else np.asarray(approach_offsets, dtype=np.float64)
+        if offsets.shape != (len(yaws), 2) or not np.all(np.isfinite(offsets)):
+            raise ValueError(f"need one finite (dx, dy) approach offset per attempt "
+                             f"({len(yaws)}), got shape {offsets.shape}")
         q = self.get_input_port(1).Eval(context)[:self._nq]
         state = np.zeros(_N_STATE)
         state[_GRASP][:2] = grasp_xy
         state[_ZS], state[_ZG] = z_safe, z_grasp
         state[_QN] = q[self._kin.q_index]
         state[_N_YAWS], state[_YAWS][:len(yaws)] = len(yaws), yaws
+        state[_OFFSETS][:offsets.size] = offsets.ravel()
         state, v_state = self._attempt(state, 0, q, context.get_time())
         context.SetDiscreteState(int(self._state), state)
         context.SetDiscreteState(int(self._v_state), v_state)
@@ -200,30 +215,47 @@ class GraspExecutor(LeafSystem):
             z_ok = z
         return z_ok
 
+    @staticmethod
+    def _offset(s) -> np.ndarray:
+        """(dx, dy) approach offset of the plan's current attempt (m, world)."""
+        return s[_OFFSETS].reshape(MAX_ATTEMPTS, 2)[int(s[_ATTEMPT])]
+
+    def _ends_of(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """(phase ends, phase durations) (s) of the plan's current attempt: without an
+        approach offset the ``slide`` lasts 0 s."""
+        durations = self._durations.copy()
+        if not np.any(self._offset(s)):
+            durations[_SLIDE] = 0.0
+        return np.cumsum(durations), durations
+
     def _reference(self, s, t: float):
         """Gripper pose (x, y, z, yaw), its rate, and the finger command at plan time t."""
         x0, y0, z0, yaw0 = s[_START]
         xg, yg, yaw_g = s[_GRASP]
+        xd, yd = np.array([xg, yg]) + self._offset(s)
         zs, zg, zr = s[_ZS], s[_ZG], s[_ZR]
         poses = [(x0, y0, z0, yaw0), (x0, y0, zr, yaw0), (x0, y0, zr, yaw0),
-                 (xg, yg, zs, yaw_g), (xg, yg, zg, yaw_g), (xg, yg, zg, yaw_g),
-                 (xg, yg, zg + self._lift, yaw_g), (xg, yg, zg + self._lift, yaw_g)]
-        fingers = [s[_F0], s[_F0], self._open, self._open, self._open, self._close,
-                   self._close, self._close]
-        k = int(np.searchsorted(self._ends, t, side="right"))
+                 (xd, yd, zs, yaw_g), (xd, yd, zg, yaw_g), (xg, yg, zg, yaw_g),
+                 (xg, yg, zg, yaw_g), (xg, yg, zg + self._lift, yaw_g),
+                 (xg, yg, zg + self._lift, yaw_g)]
+        fingers = [s[_F0], s[_F0], self._open, self._open, self._open, self._open,
+                   self._close, self._close, self._close]
+        ends, durations = self._ends_of(s)
+        # A phase lasting 0 s ends where it begins: side="right" passes over it.
+        k = int(np.searchsorted(ends, t, side="right"))
         if k >= len(PHASES):
             return np.array(poses[-1]), np.zeros(4), fingers[-1], 0.0, len(PHASES)
-        t_begin = self._ends[k] - self._durations[k]
-        value, slope = _min_jerk((t - t_begin) / self._durations[k])
+        t_begin = ends[k] - durations[k]
+        value, slope = _min_jerk((t - t_begin) / durations[k])
         a, b = np.array(poses[k]), np.array(poses[k + 1])
-        rate = slope / self._durations[k]
+        rate = slope / durations[k]
         f = fingers[k] + value * (fingers[k + 1] - fingers[k])
         pose, pose_rate = a + value * (b - a), rate * (b - a)
         if PHASES[k] == "transit":
             # Climb in the first half of the transit, before passing over the clutter.
-            z_value, z_slope = _min_jerk(2 * (t - t_begin) / self._durations[k])
+            z_value, z_slope = _min_jerk(2 * (t - t_begin) / durations[k])
             pose[2] = a[2] + z_value * (b[2] - a[2])
-            pose_rate[2] = 2 * z_slope / self._durations[k] * (b[2] - a[2])
+            pose_rate[2] = 2 * z_slope / durations[k] * (b[2] - a[2])
         return pose, pose_rate, f, rate * (fingers[k + 1] - fingers[k]), k
 
     def _update(self, context, discrete_state):

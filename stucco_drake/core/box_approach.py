@@ -1,0 +1,68 @@
+"""Where the open fingers go down to grasp a box: beyond one of its ends, then slide along it.
+
+A top-down grasp of a box puts each open finger beside one of its long faces. Clutter standing
+there (a can flush against the face) is where the finger lands: the descent stops on the can's
+top and the fingers close on nothing. Beyond the box's ends the table is often clear, and the
+open fingers are wider than the box: they can go down beyond an end, straddling the box's long
+axis, and slide along it to the grasp point, shoving aside what stands beside the long faces
+(the box, heavier, stays between them). Which end: the one whose descent keeps the fingers
+farthest from the points the robot felt on other objects; ends clear of them all by
+``clearance``, the one nearer the gripper (it came from there, through space it swept). When
+that descent is blocked, the straight one onto the grasp point comes next, and the other end
+last: it lies on the side the robot has explored least (behind the box, seen from where it
+rummaged; on the development layouts of every family a finger's spot there is taken).
+Pure numpy; world frame, metres and radians.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stucco_drake.core.grasp_choice import PAD_HALF_WIDTH
+from stucco_drake.core.grasp_yaw import OPEN_FINGER_OFFSET, checked_obstacles
+from stucco_drake.core.validation import as_finite_array
+
+
+def box_approach_offsets(pose, half_extents, obstacle_points, gripper_xy, *,
+                         margin: float = 0.01, clearance: float = 0.08,
+                         finger_offset: float = OPEN_FINGER_OFFSET) -> np.ndarray:  # fmt: skip
+    """(3, 2) approach offsets (m, world) from the grasp point of a box, in the order to try:
+    beyond one end, (0, 0) (straight down), beyond the other end.
+
+    An end's offset runs along the box's long horizontal axis, a half length plus a pad's
+    half width (:data:`~stucco_drake.core.grasp_choice.PAD_HALF_WIDTH`) plus ``margin`` from
+    the grasp point (the box's centre), so the pads go down clear of the end. The ends are
+    ordered by the distance from the nearer of the two open fingers' plate centres
+    (``finger_offset`` either side across the long axis) at the descent point to the nearest
+    obstacle point, farther first; when both exceed ``clearance`` (or there are no points),
+    the end nearer ``gripper_xy`` first.
+
+    Args:
+        pose: (3,) the box's (x, y, yaw) (m, rad, world), its centre at (x, y).
+        half_extents: the box's half sizes (hx, hy, ...) in its frame (m).
+        obstacle_points: (n, 2 or 3) points felt on other objects (m, world; z ignored).
+        gripper_xy: (2,) where the gripper is (m, world).
+    """
+    x, y, yaw = as_finite_array(pose, "pose", (3,))
+    hx, hy = (float(h) for h in np.asarray(half_extents, dtype=np.float64)[:2])
+    gripper = as_finite_array(gripper_xy, "gripper_xy", (2,))
+    _, points = checked_obstacles((x, y), obstacle_points)
+    local = np.array([1.0, 0.0]) if hx > hy else np.array([0.0, 1.0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    axis = np.array([c * local[0] - s * local[1], s * local[0] + c * local[1]])
+    across = np.array([-axis[1], axis[0]])
+    reach = max(hx, hy) + PAD_HALF_WIDTH + margin
+    ends = np.array([axis, -axis]) * reach
+    descents = np.array([x, y]) + ends
+    if len(points):
+        fingers = descents[:, None, :] + finger_offset * np.array([across, -across])[None]
+        distance = np.linalg.norm(fingers[:, :, None, :] - points[None, None], axis=-1)
+        room = np.minimum(distance.min(axis=(1, 2)), clearance)
+    else:
+        room = np.full(2, clearance)
+    near = np.linalg.norm(descents - gripper, axis=1)
+    order = np.lexsort((near, -room))
+    return np.array([ends[order[0]], np.zeros(2), ends[order[1]]])
+
+
+__all__ = ["box_approach_offsets"]
