@@ -312,14 +312,15 @@ def grasp_true_pose(log: EpisodeLog, scene: str | None = None, *, box_approach: 
     flush against clutter can fail here: a finger lands on the neighbour). ``scene`` as
     :func:`grasp_from_log`'s; a round target is closed on along the gripper's yaw, a box gone
     down on as ``box_approach`` says (:func:`~stucco_drake.bor.grasp.grasp_at_pose`; with
-    ``"end"`` the fingers kept off the contacts sensed on other objects, what an exact
+    ``"end"`` its descents ordered by the contacts sensed on other objects, what an exact
     estimate leaves unexplained). Returns the
     :class:`~stucco_drake.bor.grasp.GraspResult`."""
     built = _grasp_scene(log.scene if scene is None else str(scene))
-    clutter = log.contact_points[log.contact_object > 0] if box_approach == "end" \
-        else np.zeros((0, 3))
-    return _grasp_at_final_state(log, built, log.object_poses[-1, 0], clutter,
-                                 target_shape(built), box_approach=box_approach)
+    shape = target_shape(built)
+    ends = isinstance(shape, BoxSdf) and box_approach == "end"
+    clutter = log.contact_points[log.contact_object > 0] if ends else np.zeros((0, 3))
+    return _grasp_at_final_state(log, built, log.object_poses[-1, 0], clutter, shape,
+                                 box_approach=box_approach)
 
 
 def _grasp_at_final_state(log: EpisodeLog, built, pose, clutter, shape, **grasp_kwargs):
