@@ -1,8 +1,9 @@
 """A grasp at the target's true final pose (``bor.log.grasp_true_pose``, ``stucco-drake
-estimates --grasp-truth``): what an episode's end allows a perfect estimate. Checked on two
-committed development logs against the layouts' own geometry: where no other object stands in
-the open fingers' footprints the box is lifted; where a can stands in one, a finger lands on
-it and the box is not."""
+estimates --grasp-truth``): what an episode's end allows a perfect estimate; and a grasp made
+again at the estimate with other settings (``--regrasp``). Checked on committed development
+logs against the layouts' own geometry: where no other object stands in the open fingers'
+footprints the box is lifted; where a can stands in one, a finger going straight down lands on
+it and the box is not, and going down beyond the box's end lifts it."""
 
 import csv
 import shutil
@@ -77,6 +78,31 @@ def test_the_box_flush_against_a_can_is_lifted_when_approached_beyond_its_end():
     result = grasp_true_pose(log, LAYOUTS / "IB-L1008.yaml", box_approach="end")
     assert result.success and result.lift_height >= 0.05, result.reason
     assert result.geometric_ok, result.reason
+
+
+def test_regrasp_measures_a_grasp_only_change_on_the_same_episode(tmp_path):
+    """IB-L1010 of the thirtieth look (``box_approach: end`` in the loop): the hypotheses' pose
+    closes on the box by the paper's criterion (``hypotheses_closes``, against the true final
+    pose), and the double-size can stands 5.7 cm into a finger's footprint there. Grasped
+    again from the same end, straight down the finger lands on the can and the box is not
+    lifted; beyond its end it is."""
+    source = ROOT / "results" / "development" / "belief_r1_end_24_b"
+    log = EpisodeLog.load(source / "logs" / "IB-L1010_0.npz")
+    assert _finger_room(log) < -0.05
+    (tmp_path / "logs").mkdir()
+    shutil.copy(source / "logs" / "IB-L1010_0.npz", tmp_path / "logs")
+    for name in ("table_config.yaml", "runs.csv"):
+        shutil.copy(source / name, tmp_path / name)
+    rows = {}
+    for approach in ("top", "end"):
+        settings = ROOT / "results" / "development" / f"box_approach_{approach}.yaml"
+        assert main(["estimates", "--table", str(tmp_path), "--regrasp", "--hypothesis-params",
+                     str(settings), "--scenes", str(LAYOUTS / "IB-L1010.yaml")]) == 0
+        path = tmp_path / f"estimates_stucco_box_approach_{approach}_regrasp.csv"
+        with path.open(encoding="utf-8") as file:
+            (rows[approach],) = list(csv.DictReader(file))
+    assert rows["end"]["hypotheses_closes"] == rows["top"]["hypotheses_closes"] == "True"
+    assert rows["top"]["regrasped"] == "False" and rows["end"]["regrasped"] == "True"
 
 
 def test_grasp_truth_is_refused_where_it_cannot_apply(tmp_path, capsys):
