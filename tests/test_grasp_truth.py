@@ -42,6 +42,14 @@ def _finger_room(log: EpisodeLog) -> float:
                if k in movable)  # fmt: skip
 
 
+def _table_of(source: Path, log_name: str, folder: Path) -> None:
+    """Makes ``folder`` a table folder holding one log of the table folder ``source``."""
+    (folder / "logs").mkdir()
+    shutil.copy(source / "logs" / log_name, folder / "logs")
+    for name in ("table_config.yaml", "runs.csv"):
+        shutil.copy(source / name, folder / name)
+
+
 def test_a_box_with_room_beside_it_is_lifted_at_its_true_pose():
     log = EpisodeLog.load(SOURCE / "logs" / "FB-L1006_0.npz")
     assert _finger_room(log) > 0.0  # 5 mm to the potted meat can
@@ -55,10 +63,7 @@ def test_a_box_flush_against_a_can_is_not_lifted_and_the_table_says_so(tmp_path,
     it, the row says the true pose's grasp failed."""
     log = EpisodeLog.load(SOURCE / "logs" / "IB-L1008_0.npz")
     assert _finger_room(log) < -0.05
-    (tmp_path / "logs").mkdir()
-    shutil.copy(SOURCE / "logs" / "IB-L1008_0.npz", tmp_path / "logs")
-    for name in ("table_config.yaml", "runs.csv"):
-        shutil.copy(SOURCE / name, tmp_path / name)
+    _table_of(SOURCE, "IB-L1008_0.npz", tmp_path)
     assert main(["estimates", "--table", str(tmp_path), "--grasp-truth"]) != 0
     assert capsys.readouterr().err.strip().splitlines() == [
         "stucco-drake estimates: error: --grasp-truth: no scene file for IB-L1008; give it, "
@@ -89,10 +94,7 @@ def test_regrasp_measures_a_grasp_only_change_on_the_same_episode(tmp_path):
     source = ROOT / "results" / "development" / "belief_r1_end_24_b"
     log = EpisodeLog.load(source / "logs" / "IB-L1010_0.npz")
     assert _finger_room(log) < -0.05
-    (tmp_path / "logs").mkdir()
-    shutil.copy(source / "logs" / "IB-L1010_0.npz", tmp_path / "logs")
-    for name in ("table_config.yaml", "runs.csv"):
-        shutil.copy(source / name, tmp_path / name)
+    _table_of(source, "IB-L1010_0.npz", tmp_path)
     rows = {}
     for approach in ("top", "end"):
         settings = ROOT / "results" / "development" / f"box_approach_{approach}.yaml"
@@ -106,10 +108,7 @@ def test_regrasp_measures_a_grasp_only_change_on_the_same_episode(tmp_path):
 
 
 def test_grasp_truth_is_refused_where_it_cannot_apply(tmp_path, capsys):
-    (tmp_path / "logs").mkdir()
-    shutil.copy(SOURCE / "logs" / "IB-L1008_0.npz", tmp_path / "logs")
-    for name in ("table_config.yaml", "runs.csv"):
-        shutil.copy(SOURCE / name, tmp_path / name)
+    _table_of(SOURCE, "IB-L1008_0.npz", tmp_path)
     for extra, message in (
         (["--grasp-truth", "--after-actions", "12"],
          "--grasp-truth: not with --after-actions (a log holds the plant's state only at its "
