@@ -186,14 +186,15 @@ def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
     other axes (:func:`~stucco_drake.core.grasp_yaw.cylinder_grasp_yaws`). A box is gone down
     on as ``box_approach`` says (:attr:`~stucco_drake.core.hypothesis_params.HypothesisParams.
     box_approach`): ``"end"`` beyond an end and along it (the end whose descent keeps the
-    fingers off ``clutter`` first, then the other, then straight down when a descent is
+    fingers off ``clutter`` first, then straight down, then the other end when a descent is
     blocked: :func:`~stucco_drake.core.box_approach.box_approach_offsets`), ``"top"`` straight.
     """
     context = simulator.get_context()
     X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
     x, y, yaw = (float(v) for v in target_pose)
     if box_approach not in BOX_APPROACHES:
-        raise ValueError(f"box_approach: expected one of {BOX_APPROACHES}, got {box_approach!r}")
+        raise ValueError(f"box_approach: expected one of {', '.join(BOX_APPROACHES)}, "
+                         f"got {box_approach!r}")
     if isinstance(target_shape, BoxSdf) and box_approach == "end":
         centre = grasp_at(np.array([x, y, yaw]), target_shape)[0, :2]
         offsets = box_approach_offsets((*centre, yaw), target_shape.half_extents, clutter,

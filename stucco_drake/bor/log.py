@@ -293,6 +293,7 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
         if estimate is None:
             return None
         pose, clutter = estimate.pose, estimate_clutter(estimate, points)
+        approach = "top"
     elif estimator == "hypotheses":
         found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log),
                                     hypothesis_params)
@@ -300,10 +301,9 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
             return None
         pose, clutter = found.pose, found.unexplained_points(log.contact_points, points)
         approach = (hypothesis_params or HypothesisParams()).box_approach
-        return _grasp_at_final_state(log, built, pose, clutter, shape, box_approach=approach)
     else:
         raise ValueError(f"estimator: expected 'rules' or 'hypotheses', got {estimator!r}")
-    return _grasp_at_final_state(log, built, pose, clutter, shape)
+    return _grasp_at_final_state(log, built, pose, clutter, shape, box_approach=approach)
 
 
 def grasp_true_pose(log: EpisodeLog, scene: str | None = None, *, box_approach: str = "top"):

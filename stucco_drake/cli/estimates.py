@@ -12,7 +12,9 @@ there: would a policy stopping at that count have grasped? (Each cut is replayed
 with the table's filter stream, so it is the grasp's estimate at that point.) With
 ``--grasp-truth``, each episode's target is also grasped in simulation at its true final pose
 (``true_pose_grasped``): what the episode's end allows a perfect estimate, so a failed grasp
-can be told apart from a wrong estimate.
+can be told apart from a wrong estimate. With ``--regrasp``, the hypotheses' grasp is made
+again from the logged final state with other settings (``regrasped``): a change to the grasp
+alone, measured on the same episodes.
 """
 
 from __future__ import annotations
@@ -235,7 +237,7 @@ def _motion_scales(given) -> tuple[tuple[float, ...], str]:
 
 def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales,
               hypothesis_params=None, after=None, truth_scenes=None,
-              grasp_truth: bool = True, regrasp: bool = False) -> list[dict]:  # fmt: skip
+              grasp_truth: bool = False, regrasp: bool = False) -> list[dict]:  # fmt: skip
     """The rows of :func:`~stucco_drake.eval.target_estimates.score_estimates` for ``method``
     replayed at the table's settings on one log (runs in a worker): one for the whole
     episode, or with ``after`` one per action count in it that the log reaches, each scoring

@@ -20,6 +20,7 @@ import numpy as np
 
 from stucco_drake.core.grasp_choice import PAD_HALF_WIDTH
 from stucco_drake.core.grasp_yaw import OPEN_FINGER_OFFSET, checked_obstacles
+from stucco_drake.core.icp import rotations
 from stucco_drake.core.validation import as_finite_array
 
 
@@ -48,8 +49,7 @@ def box_approach_offsets(pose, half_extents, obstacle_points, gripper_xy, *,
     gripper = as_finite_array(gripper_xy, "gripper_xy", (2,))
     _, points = checked_obstacles((x, y), obstacle_points)
     local = np.array([1.0, 0.0]) if hx > hy else np.array([0.0, 1.0])
-    c, s = np.cos(yaw), np.sin(yaw)
-    axis = np.array([c * local[0] - s * local[1], s * local[0] + c * local[1]])
+    axis = rotations(np.array([yaw]))[0] @ local
     across = np.array([-axis[1], axis[0]])
     reach = max(hx, hy) + PAD_HALF_WIDTH + margin
     ends = np.array([axis, -axis]) * reach

@@ -55,8 +55,8 @@ class HypothesisParams:
             (:func:`~stucco_drake.core.grasp_choice.choose_grasp`).
         box_approach: how the grasp of a box goes down: ``"top"`` straight onto the grasp
             point; ``"end"`` beyond the end whose descent keeps the open fingers off the
-            clutter felt, then sliding along the box to the grasp point (the other end, then
-            straight down, when a descent is blocked: :mod:`~stucco_drake.core.box_approach`).
+            clutter felt, then sliding along the box to the grasp point (straight down, then
+            the other end, when a descent is blocked: :mod:`~stucco_drake.core.box_approach`).
     """
 
     contact_noise: float = 0.004
