@@ -1,6 +1,7 @@
 """Choosing the probe the pose hypotheses disagree on (core/probe_choice.py), against geometry
 done by hand: where a square footprint first meets a box on a straight approach, the entropy of
-outcomes of known weights, and a policy that, of two rival poses, probes where they differ."""
+outcomes of known weights, the candidate touches along a face, and a policy that, of two rival
+poses, probes where they differ."""
 
 import dataclasses
 
@@ -10,6 +11,7 @@ import pytest
 from stucco_drake.core.hypothesis_weights import distinct_rivals
 from stucco_drake.core.probe_choice import (
     BUMP,
+    face_probe_points,
     footprint_meets,
     footprint_outline,
     outcome_entropy,
@@ -105,3 +107,55 @@ def test_of_two_rival_poses_the_policy_probes_where_they_differ():
         differ = (np.isfinite(outcomes).sum() == 1
                   or abs(outcomes[0] - outcomes[1]) >= params.outcome_tolerance)
         assert differ == discriminate, (discriminate, outcomes)
+
+
+def test_candidate_touches_run_along_each_face_while_the_footprint_overlaps_it():
+    """The box unturned at (0.3, 0.1): its +x face at x = 0.33 spans y in [0.021, 0.179]
+    (half length 0.079). The footprint reaches 0.04 either way along y, so the gripper's
+    origin may go 0.079 + 0.04 - 0.01 = 0.109 either side of the face's middle: every 2 cm
+    from -0.10 to 0.10, 11 touches. The +y face (half length 0.03 along x) gets every 2 cm
+    within 0.03 + 0.04 - 0.01 = 0.06 (exclusive): -0.04 to 0.04, 5 touches. Turned by a
+    quarter turn, the same touches turn with the box."""
+    points, normals = face_probe_points([0.3, 0.1], np.array([0.03, 0.079]), 0.0, FOOTPRINT,
+                                        0.02)  # fmt: skip
+    plus_x = np.all(np.isclose(normals, [1.0, 0.0]), axis=1)
+    plus_y = np.all(np.isclose(normals, [0.0, 1.0]), axis=1)
+    assert len(points) == 2 * 11 + 2 * 5
+    np.testing.assert_allclose(points[plus_x, 0], 0.33)
+    np.testing.assert_allclose(np.sort(points[plus_x, 1]), 0.1 + np.linspace(-0.1, 0.1, 11),
+                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(points[plus_y, 1], 0.179)
+    np.testing.assert_allclose(np.sort(points[plus_y, 0]), 0.3 + np.linspace(-0.04, 0.04, 5),
+                               atol=1e-12)  # fmt: skip
+    turned_points, turned_normals = face_probe_points([0.0, 0.0], np.array([0.03, 0.079]),
+                                                      np.pi / 2, FOOTPRINT, 0.02)  # fmt: skip
+    # The box's +x face now faces +y, at y = 0.03, its touches along x.
+    faces_y = np.all(np.isclose(turned_normals, [0.0, 1.0]), axis=1)
+    np.testing.assert_allclose(turned_points[faces_y, 1], 0.03)
+    assert np.count_nonzero(faces_y) == 11
+
+
+def test_touches_along_the_face_tell_an_end_on_box_from_a_turned_one():
+    """The end-on box (long axis along x: x in [0.121, 0.279], y in [-0.03, 0.03]) and the
+    same box turned (x in [0.121, 0.181], y in [-0.079, 0.079]) share the face in front of the
+    gripper, and are equally likely. The probes made of each pose's faces meet both at that
+    face (the same outcome); among the touches every 2 cm along the faces there is one beside
+    the end face, where only the turned box stands (one met, the other not)."""
+    end_on = np.array([0.2, 0.0, np.pi / 2])
+    turned = np.array([0.151, 0.0, 0.0])
+    hypotheses = Hypotheses(np.array([end_on, turned]), np.array([0.0, 0.0]), end_on)
+    outline, planes = footprint_outline(FOOTPRINT)
+    for face_step in (None, 0.02):
+        params = ProbeParams(face_step=face_step)
+        policy = FaceProbePolicy(BOX, FOOTPRINT, max_step=0.03, params=params)
+        assert policy.next_step(np.zeros(2), False, hypotheses) is not None
+        probe, far = policy._probe, policy._waypoints[-1]
+        support = float(np.max(FOOTPRINT @ -probe.normal))
+        travel = float((far - probe.point) @ probe.normal) - support + params.overshoot
+        outcomes = probe_outcomes(np.zeros((0, 2)), far, probe.normal, travel,
+                                  hypotheses.poses, BOX, outline, planes)  # fmt: skip
+        met = np.isfinite(outcomes)
+        if face_step is None:
+            assert met.all() and abs(outcomes[0] - outcomes[1]) < params.outcome_tolerance
+        else:
+            assert met.tolist() == [False, True], outcomes

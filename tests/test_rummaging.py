@@ -394,3 +394,52 @@ def test_a_confidence_no_probe_has_borne_out_does_not_stop_the_policy():
                                   dataclasses.replace(params, verified_stop=False))
     _positions, steps, _ = play(hasty, pose, belief)
     assert len(steps) == first + 1 and hasty.rounds == 0
+
+
+class Unsure:
+    """Pose hypotheses stand-in: the box's true pose, always at a confidence of 0.3."""
+
+    def __init__(self, pose):
+        self.pose, self.confidence = pose, 0.3
+
+    def __call__(self):
+        return self
+
+
+def test_shove_first_pushes_an_unsure_lane_through_from_the_touch_then_probes():
+    """The box (x 0.221..0.379, y 0.14..0.20) is placed at a confidence of 0.3 from the
+    first touch on. By default the policy probes it at once. With ``shove_first`` it touches
+    beside twice (towards the contact, at y 0.13 and 0.16, as the test above), then pushes
+    lane 0.10 through from where it backed off (the last touch at x = 0.221 - 0.04 = 0.181,
+    backed off 2 cm: 0.161), never going back to the lanes' start (x -0.04) on the way, and
+    probes after the shove."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+
+    def overlap_middle(y):
+        return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
+
+    for shove_first in (False, True):
+        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                       RummageParams(coverage=BAND_NEAREST, max_actions=80,
+                                                     retouch_back=0.0,
+                                                     shove_first=shove_first))  # fmt: skip
+        xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
+        for _ in range(80):
+            step = policy.next_step(xy, in_contact, Unsure(pose))
+            if step is None:
+                break
+            kinds.append(policy._kind)
+            positions.append(xy.copy())
+            xy, in_contact = guarded_move(xy, step, pose)
+            touches.append(in_contact and kinds[-1] == "push")
+            if in_contact:
+                policy.sensed([[xy[0] + 0.04, overlap_middle(xy[1]), 0.1]])
+        shove = kinds.index("shove") if "shove" in kinds else len(kinds)
+        probe = kinds.index("probe")
+        if not shove_first:
+            assert probe < shove and sum(touches[:probe]) == 1
+            continue
+        assert shove < probe and sum(touches[:shove]) == 3
+        assert positions[shove] == pytest.approx([0.161, 0.10], abs=2e-3)
+        first_touch = touches.index(True)
+        assert min(p[0] for p in positions[first_touch:shove]) > 0.0

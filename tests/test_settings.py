@@ -37,6 +37,7 @@ def test_fields_are_replaced_by_kind_and_nested_settings_by_nested_mappings():
     ({"direct_only": 1}, "probe-params: direct_only: expected true or false, got 1"),
     ({"long_face_offsets": 0.5}, "probe-params: long_face_offsets: expected a list of numbers"),
     ([1, 2], "probe-params: expected a mapping of ProbeParams fields, got list"),
+    ({"face_step": 0}, "face_step: expected a positive step (m) or null, got 0.0"),
 ])  # fmt: skip
 def test_a_bad_key_or_value_names_its_path(given, message):
     with pytest.raises(ValueError) as error:

@@ -21,7 +21,8 @@ from pydrake.systems.framework import DiagramBuilder
 from stucco_drake.bor.grasp import build_grasp_scene
 from stucco_drake.core.coverage import CoverageParams, coverage_waypoints, waypoint_steps
 from stucco_drake.core.penetration import RobotPenetration
-from stucco_drake.core.probing import FaceProbePolicy, ProbeParams, gripper_footprint
+from stucco_drake.core.probe_paths import gripper_footprint
+from stucco_drake.core.probing import FaceProbePolicy, ProbeParams
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.rummaging import BeliefRummagingPolicy
 from stucco_drake.robot.gripper_sdf import gripper_penetration

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from stucco_drake.core.icp import rotations
-from stucco_drake.core.probing import gripper_footprint
+from stucco_drake.core.probe_paths import gripper_footprint
 
 #: Depth (m) of the band of cross-section cells nearest ahead of the gripper that count as
 #: where it meets the target.

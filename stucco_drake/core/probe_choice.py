@@ -117,6 +117,32 @@ def outcome_entropy(outcomes, weights, tolerance: float) -> float:
     return float(-(mass * np.log(mass)).sum())
 
 
+def face_probe_points(centre, half, yaw: float, footprint, step: float,
+                      min_overlap: float = 0.01) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate touches of every face of a box (``centre`` (2,) W, ``half`` extents (2,)
+    along its axes at ``yaw``) as (points (k, 2), outward normals (k, 2)), W: the gripper's
+    origin every ``step`` (m) along each face's line, from the face's middle out to where
+    the footprint ((m, 2) about its origin) still overlaps the face by ``min_overlap`` (m).
+    A touch off a face's middle is what tells a box from a turned one: the gripper, wider
+    than the box's end face, passes beside it where the turned box's long face stands."""
+    footprint = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
+    R = rotations(float(yaw))
+    points, normals = [], []
+    for axis, sign in ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0)):
+        normal, tangent = np.zeros(2), np.zeros(2)
+        normal[axis], tangent[1 - axis] = sign, 1.0
+        normal, tangent = R @ normal, R @ tangent
+        length = half[1 - axis]
+        reach_up = length + float(np.max(footprint @ -tangent)) - min_overlap
+        reach_down = length + float(np.max(footprint @ tangent)) - min_overlap
+        offsets = np.concatenate([-np.arange(0.0, reach_down, step)[::-1][:-1],
+                                  np.arange(0.0, reach_up, step)])  # fmt: skip
+        face = np.asarray(centre) + normal * half[axis]
+        points.extend(face + offsets[:, None] * tangent)
+        normals.extend(np.repeat(normal[None], len(offsets), axis=0))
+    return np.array(points), np.array(normals)
+
+
 def most_informative(candidates, poses, costs, shape, footprint, *,
                      temperature: float, tolerance: float, overshoot: float,
                      start) -> tuple[float, object, list] | None:  # fmt: skip
@@ -151,5 +177,5 @@ def most_informative(candidates, poses, costs, shape, footprint, *,
     return best
 
 
-__all__ = ["BUMP", "footprint_meets", "footprint_outline", "most_informative", "outcome_entropy",
-           "probe_outcomes"]
+__all__ = ["BUMP", "face_probe_points", "footprint_meets", "footprint_outline", "most_informative",
+           "outcome_entropy", "probe_outcomes"]

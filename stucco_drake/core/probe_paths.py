@@ -1,6 +1,7 @@
 """Paths of the gripper's origin around a box in the plane: whether a straight move enters it,
-and the shortest way round its corners (used by the guarded probes,
-:mod:`~stucco_drake.core.probing`). Points (x, y) in the world frame W (m), yaw about z (rad).
+and the shortest way round its corners, and the gripper's planar footprint (used by the
+guarded probes, :mod:`~stucco_drake.core.probing`). Points (x, y) in the world frame W (m),
+yaw about z (rad).
 """
 
 from __future__ import annotations
@@ -70,4 +71,16 @@ def travel_waypoints(start, goal, centre, half, yaw) -> list[np.ndarray]:
     return best
 
 
-__all__ = ["rotation_2d", "segment_enters_box", "travel_waypoints"]
+def gripper_footprint(penetration, rotation_WE) -> np.ndarray:
+    """(m, 2) the gripper's planar footprint about its origin in W axes (m): the cells inside
+    the robot of a grid pxpen (``penetration.robot_sdf``, in the end-effector frame E),
+    every height, turned by ``rotation_WE`` (3, 3)."""
+    grid = penetration.robot_sdf
+    inside = np.argwhere(np.asarray(grid.values) < 0)
+    points_E = np.asarray(grid.lower) + inside * float(grid.resolution)
+    xy = (points_E @ np.asarray(rotation_WE, dtype=np.float64).T)[:, :2]
+    # The convex hull's extremes suffice for supports and radii; keep the outermost cells.
+    return np.unique(np.round(xy, 4), axis=0)
+
+
+__all__ = ["gripper_footprint", "rotation_2d", "segment_enters_box", "travel_waypoints"]

@@ -32,7 +32,7 @@ from collections.abc import Callable
 import numpy as np
 
 from stucco_drake.core.hypothesis_weights import distinct_rivals
-from stucco_drake.core.probe_choice import most_informative
+from stucco_drake.core.probe_choice import face_probe_points, most_informative
 from stucco_drake.core.probe_paths import rotation_2d, travel_waypoints
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
@@ -81,6 +81,13 @@ class ProbeParams:
             Both keep the footprint off the target; the extent is the tighter for a
             footprint longer than it is wide, and shortens every travel and approach. Off:
             as every probe-policy folder before the development layouts' eighteenth look.
+        face_step: with ``discriminate``, the candidate touches of each rival box are every
+            face's, the gripper's origin every ``face_step`` along it out to where its
+            footprint just overlaps the face, nearest travel first
+            (:func:`~stucco_drake.core.probe_choice.face_probe_points`): the touch beside an
+            end face where a turned box would stand is among them. None (the default): the
+            probes :func:`plan_probes` makes of each, as every folder before the development
+            layouts' thirty-first look.
     """
 
     standoff: float = 0.02
@@ -103,6 +110,12 @@ class ProbeParams:
     min_gain: float = 0.1
     max_probes: int = 6
     extent_margin: bool = False
+    face_step: float | None = None
+
+    def __post_init__(self):
+        if self.face_step is not None and not self.face_step > 0:
+            raise ValueError(f"face_step: expected a positive step (m) or null, "
+                             f"got {self.face_step!r}")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,6 +169,10 @@ def plan_probes(pose, shape: BoxSdf | CylinderSdf, gripper_xy, params: ProbePara
     end_normal[long_axis] = 1.0 if local[long_axis] >= 0 else -1.0
     end = Probe(centre + R @ (end_normal * half[long_axis]), R @ end_normal)
     return [end, *probes] if params.end_face_first else [*probes, end]
+
+
+def _path_length(points) -> float:
+    return float(np.sum(np.linalg.norm(np.diff(np.asarray(points), axis=0), axis=1)))
 
 
 def _shorter(step: np.ndarray, length: float) -> np.ndarray:
@@ -333,10 +350,12 @@ class FaceProbePolicy:
         poses = np.asarray(hypotheses.poses)[rivals]
         candidates = []
         for source in (pose, *poses):
-            for probe in plan_probes(source, self.shape, xy, p):
+            for probe in self._candidates(source, xy):
                 route = None if self._made_near(probe) else self._route(xy, source, probe)
                 if route is not None:
                     candidates.append((probe, *route))
+        if p.face_step is not None:  # of equal gains, the nearest
+            candidates.sort(key=lambda c: _path_length([xy, *c[2]]))
         best = most_informative(candidates, poses, np.asarray(hypotheses.costs)[rivals],
                                 self.shape, self.footprint, temperature=p.rival_temperature,
                                 tolerance=p.outcome_tolerance, overshoot=p.overshoot,
@@ -346,6 +365,15 @@ class FaceProbePolicy:
         self._probe, self._waypoints, self._phase = best[1], best[2], "travel"
         self._informative = True
         return True
+
+    def _candidates(self, pose, xy) -> list[Probe]:
+        """The touches of the target at ``pose`` a discriminating probe is chosen among."""
+        if self.params.face_step is None or isinstance(self.shape, CylinderSdf):
+            return plan_probes(pose, self.shape, xy, self.params)
+        centre, half, yaw = outline_box(pose, self.shape)
+        points, normals = face_probe_points(centre, half, yaw, self.footprint,
+                                            self.params.face_step)  # fmt: skip
+        return [Probe(point, normal) for point, normal in zip(points, normals, strict=True)]
 
     def _plan(self, xy, pose, hypotheses=None) -> bool:
         """Sets up the next probe that can be made; False when none is left."""
@@ -400,15 +428,3 @@ class FaceProbePolicy:
         if gap > p.standoff + p.approach_step:
             return -n * min(gap - p.standoff, p.travel_step)
         return -n * p.approach_step
-
-
-def gripper_footprint(penetration, rotation_WE) -> np.ndarray:
-    """(m, 2) the gripper's planar footprint about its origin in W axes (m): the cells inside
-    the robot of a grid pxpen (``penetration.robot_sdf``, in the end-effector frame E),
-    every height, turned by ``rotation_WE`` (3, 3)."""
-    grid = penetration.robot_sdf
-    inside = np.argwhere(np.asarray(grid.values) < 0)
-    points_E = np.asarray(grid.lower) + inside * float(grid.resolution)
-    xy = (points_E @ np.asarray(rotation_WE, dtype=np.float64).T)[:, :2]
-    # The convex hull's extremes suffice for supports and radii; keep the outermost cells.
-    return np.unique(np.round(xy, 4), axis=0)

@@ -48,6 +48,14 @@ class RummageParams:
         push_through_below: a lane whose felt object, once touched again or probed, the
             belief places with a confidence below this is pushed through to its far end,
             contacts ignored (once per lane; 0: never).
+        shove_first: once its touches are spent, a lane whose felt object the belief places
+            with a confidence below ``push_through_below`` is pushed through at once, from
+            where the gripper backed off the last touch, and probed after. False: probed
+            first, pushed through from the lane's start if still not placed, as every folder
+            before the development layouts' thirty-first look, where this was tried: three
+            points place a can at 0.99 or more, so it is probed; a box is placed lower and
+            shoved at, and the 10 kg box there stays put while what stands beside it is
+            shoved along (a light box would be shoved away).
         check_each_probe: ask the belief after each probe of a round that touched the
             target (any probe without ``verified_stop``), not only once the round is over,
             and stop there once it passes ``stop_confidence``.
@@ -70,4 +78,5 @@ class RummageParams:
     side_margin: float = 0.01
     transit_back: float = 0.04
     push_through_below: float = 0.5
+    shove_first: bool = False
     check_each_probe: bool = False

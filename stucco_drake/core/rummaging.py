@@ -160,6 +160,8 @@ class BeliefRummagingPolicy:
 
     def _may_probe(self) -> bool:
         p = self.params
+        if p.shove_first and not self._shoved and self.confidence < p.push_through_below:
+            return False  # the lane is pushed through first
         return (self.pose is not None and self.rounds < p.max_rounds
                 and self._lane_rounds < p.lane_rounds)
 
@@ -246,7 +248,7 @@ class BeliefRummagingPolicy:
             # Which way is decided after the back-off, once this touch's contacts are known.
             self._queue = [("retouch", np.array([self._queue[0][1][0], self._touch_y]))]
         else:
-            self._leave_lane(xy)
+            self._leave_lane(xy, from_touch=True)
         self._kind = "back_off"
         return back
 
@@ -289,16 +291,20 @@ class BeliefRummagingPolicy:
         """Back along -x to the lanes' x at ``xy``'s y; then the next lane."""
         self._queue = [("move", np.array([self.lanes[self._lane, 0, 0], xy[1]]))]
 
-    def _leave_lane(self, xy) -> None:
+    def _leave_lane(self, xy, from_touch: bool = False) -> None:
         """Done with what the lane's push felt: withdraw, or, where the belief places it
-        with a confidence below ``push_through_below``, push the lane through (once)."""
+        with a confidence below ``push_through_below``, push the lane through (once; with
+        ``shove_first``, from where the gripper backs off to when ``xy`` is a touch's)."""
         if self._shoved or self.confidence >= self.params.push_through_below:
             self._withdraw(xy)
             return
         self._shoved, self.shoves = True, self.shoves + 1
         start, far, back = self.lanes[self._lane]
-        self._queue = [("move", np.array([start[0], xy[1]])), ("move", start),
-                       ("shove", far), ("move", back), ("assess", far)]
+        if self.params.shove_first and from_touch:  # on from where the gripper backs off to
+            self._queue = [("move", np.array([xy[0] - self.params.back_off, start[1]]))]
+        else:
+            self._queue = [("move", np.array([start[0], xy[1]])), ("move", start)]
+        self._queue += [("shove", far), ("move", back), ("assess", far)]
 
     def _skip_beyond(self, xy) -> None:
         """The travel to a waypoint keeps bumping: the lanes that lie beyond the gripper on
