@@ -20,7 +20,10 @@ little behind its start, clear of what stands just in front of it, and a travel 
 bumping into something gives up every lane beyond it on that side (they are reached the same
 way). And a lane whose felt object the belief still does not place with some confidence, once
 touched again or probed, is pushed through to its far end, contacts ignored: a guarded push
-never gets past clutter standing in front of the target, a shove moves it aside.
+never gets past clutter standing in front of the target, a shove moves it aside. With
+``shove_first`` that push comes as soon as the touches beside are spent, before any probe, from
+where the gripper backed off: what stands flush beside a heavy target is shoved along, and the
+target is probed after.
 
 Planar points (x, y) in the world frame W (m); the gripper's yaw is fixed.
 """
