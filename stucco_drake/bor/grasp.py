@@ -30,7 +30,7 @@ from pydrake.systems.analysis import Simulator
 from stucco_drake.core.box_approach import box_approach_offsets
 from stucco_drake.core.grasp_choice import PAD_HALF_WIDTH, grasp_at, grasp_closes
 from stucco_drake.core.grasp_yaw import cylinder_grasp_yaws
-from stucco_drake.core.hypothesis_params import BOX_APPROACHES
+from stucco_drake.core.hypothesis_params import check_box_approach
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.scenes.builder import GRIPPER, IIWA, BuiltScene, build_scene, yaw_of
 from stucco_drake.scenes.scene_file import SceneFile
@@ -192,10 +192,7 @@ def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
     context = simulator.get_context()
     X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
     x, y, yaw = (float(v) for v in target_pose)
-    if box_approach not in BOX_APPROACHES:
-        raise ValueError(f"box_approach: expected one of {', '.join(BOX_APPROACHES)}, "
-                         f"got {box_approach!r}")
-    if isinstance(target_shape, BoxSdf) and box_approach == "end":
+    if check_box_approach(box_approach) == "end" and isinstance(target_shape, BoxSdf):
         centre = grasp_at(np.array([x, y, yaw]), target_shape)[0, :2]
         offsets = box_approach_offsets((*centre, yaw), target_shape.half_extents, clutter,
                                        X_WG.translation()[:2])  # fmt: skip

@@ -10,6 +10,14 @@ import numpy as np
 BOX_APPROACHES = ("top", "end")
 
 
+def check_box_approach(value) -> str:
+    """``value`` if it is one of :data:`BOX_APPROACHES`; ValueError naming it otherwise."""
+    if value not in BOX_APPROACHES:
+        raise ValueError(f"box_approach: expected one of {', '.join(BOX_APPROACHES)}, "
+                         f"got {value!r}")
+    return value
+
+
 @dataclasses.dataclass(frozen=True)
 class HypothesisParams:
     """Settings of :func:`~stucco_drake.core.pose_hypotheses.pose_hypotheses` (m unless noted).
@@ -83,6 +91,4 @@ class HypothesisParams:
     box_approach: str = "top"
 
     def __post_init__(self):
-        if self.box_approach not in BOX_APPROACHES:
-            raise ValueError(f"box_approach: expected one of {', '.join(BOX_APPROACHES)}, "
-                             f"got {self.box_approach!r}")
+        check_box_approach(self.box_approach)

@@ -109,6 +109,12 @@ class GraspExecutor(LeafSystem):
         self._durations = np.asarray(durations, dtype=float)
         if len(self._durations) != len(PHASES):
             raise ValueError(f"need {len(PHASES)} durations")
+        # The phase timings, (ends, durations) (s), of an attempt with an approach offset and
+        # of one without (its slide lasts 0 s): looked up at every control step.
+        straight = self._durations.copy()
+        straight[_SLIDE] = 0.0
+        self._timings = {True: (np.cumsum(self._durations), self._durations),
+                         False: (np.cumsum(straight), straight)}
         arm_joints = set(self._kin.q_index)
         fingers = [robot_plant.get_joint(j) for j in robot_plant.GetJointIndices()]
         fingers = [j for j in fingers if j.num_positions() == 1
@@ -223,10 +229,7 @@ class GraspExecutor(LeafSystem):
     def _ends_of(self, s) -> tuple[np.ndarray, np.ndarray]:
         """(phase ends, phase durations) (s) of the plan's current attempt: without an
         approach offset the ``slide`` lasts 0 s."""
-        durations = self._durations.copy()
-        if not np.any(self._offset(s)):
-            durations[_SLIDE] = 0.0
-        return np.cumsum(durations), durations
+        return self._timings[bool(np.any(self._offset(s)))]
 
     def _reference(self, s, t: float):
         """Gripper pose (x, y, z, yaw), its rate, and the finger command at plan time t."""
