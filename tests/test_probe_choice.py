@@ -55,6 +55,24 @@ def test_each_hypothesis_predicts_where_the_approach_first_touches_it():
     assert outcomes[2] == BUMP
 
 
+def test_what_was_felt_is_met_whatever_the_hypothesis():
+    """The approach of the test above with a point felt at (-0.1, 0): the footprint's leading
+    edge (x + 0.04) holds it 5 mm deep from x = -0.135, 0.065 m into the approach, so every
+    hypothesis's outcome is that (the box at the origin, met at 0.13, included). A point felt
+    on the travel path bumps under every hypothesis; one 1 cm beside the footprint's path
+    changes nothing."""
+    outline, planes = footprint_outline(FOOTPRINT)
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.2, 0.0], [-0.3, -0.2, 0.0]])
+    path = np.column_stack([np.full(20, -0.3), np.linspace(-0.4, 0.0, 20)])
+    args = (np.array([-0.2, 0.0]), np.array([-1.0, 0.0]), 0.3, poses, BOX, outline, planes)
+    ahead = probe_outcomes(path, *args, felt=np.array([[-0.1, 0.0]]))
+    np.testing.assert_allclose(ahead[:2], 0.065, atol=0.0025 + 1e-9)
+    assert ahead[2] == BUMP
+    assert np.all(probe_outcomes(path, *args, felt=np.array([[-0.3, -0.1]])) == BUMP)
+    beside = probe_outcomes(path, *args, felt=np.array([[-0.1, 0.05]]))
+    np.testing.assert_array_equal(beside, probe_outcomes(path, *args))
+
+
 def test_outcome_entropy_counts_outcomes_within_the_tolerance_as_one():
     half = np.array([0.5, 0.5])
     assert outcome_entropy([0.01, 0.05], half, 0.015) == pytest.approx(np.log(2))
@@ -80,6 +98,7 @@ class Hypotheses:
     poses: np.ndarray
     costs: np.ndarray
     pose: np.ndarray
+    felt: np.ndarray | None = None
 
 
 def test_of_two_rival_poses_the_policy_probes_where_they_differ():
@@ -159,3 +178,36 @@ def test_touches_along_the_face_tell_an_end_on_box_from_a_turned_one():
             assert met.all() and abs(outcomes[0] - outcomes[1]) < params.outcome_tolerance
         else:
             assert met.tolist() == [False, True], outcomes
+
+
+def test_a_probe_whose_outcome_was_felt_already_is_not_chosen():
+    """The end-on and turned boxes of the test above. Something was felt where the touch
+    beside the end face meets the turned box: the gripper meets it there whatever the box's
+    pose, so that touch tells nothing. Counting what was felt, the policy probes elsewhere,
+    where the two poses' outcomes still differ with the felt point standing where it is."""
+    end_on = np.array([0.2, 0.0, np.pi / 2])
+    turned = np.array([0.151, 0.0, 0.0])
+    outline, planes = footprint_outline(FOOTPRINT)
+
+    def first_probe(felt_obstacles, felt):
+        hypotheses = Hypotheses(np.array([end_on, turned]), np.zeros(2), end_on, felt)
+        params = ProbeParams(face_step=0.02, felt_obstacles=felt_obstacles)
+        policy = FaceProbePolicy(BOX, FOOTPRINT, max_step=0.03, params=params)
+        assert policy.next_step(np.zeros(2), False, hypotheses) is not None
+        probe, far = policy._probe, policy._waypoints[-1]
+        support = float(np.max(FOOTPRINT @ -probe.normal))
+        travel = float((far - probe.point) @ probe.normal) - support + params.overshoot
+        path = np.array([np.zeros(2), *policy._waypoints])
+        return probe, probe_outcomes(path, far, probe.normal, travel, hypotheses.poses, BOX,
+                                     outline, planes, felt=felt)  # fmt: skip
+
+    plain, _ = first_probe(False, None)
+    # Where the touch made without anything felt first meets the turned box: the turned
+    # box's face point it was planned on (the face's outward normal points at the gripper).
+    felt = np.array([plain.point])
+    _, known = first_probe(False, felt)
+    assert abs(known[0] - known[1]) < 0.015 or np.all(known == BUMP), known
+    probe, outcomes = first_probe(True, felt)
+    assert np.linalg.norm(probe.point - plain.point) > 0.01
+    met = np.isfinite(outcomes) & (outcomes != BUMP)
+    assert met.sum() == 1 or abs(outcomes[0] - outcomes[1]) >= 0.015, outcomes

@@ -25,6 +25,8 @@ Units: m, rad; world frame W.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from stucco_drake.core.pose_hypotheses import (
@@ -92,7 +94,9 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
         return None
     poses, costs, explained, scale_of = (np.concatenate(part) for part in zip(*found,
                                                                             strict=True))
-    return weigh_hypotheses(poses, costs, explained, shape, params, scale_of)
+    found = weigh_hypotheses(poses, costs, explained, shape, params, scale_of)
+    felt = sensed + found.motion_scales[found.chosen] * motion
+    return dataclasses.replace(found, felt=felt[:, :2])
 
 
 __all__ = ["MOTION_SCALES", "motion_scaled_hypotheses"]

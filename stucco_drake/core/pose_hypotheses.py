@@ -93,6 +93,9 @@ class PoseHypotheses:
         motion_scales: (k,) each hypothesis's motion scale (see
             :mod:`~stucco_drake.core.motion_scale`); None when the points were taken as
             tracked.
+        felt: (n, 2) every contact point the hypotheses were made from, placed as the chosen
+            hypothesis places them (at its motion scale): where something was felt, whatever
+            it is (None: not given).
     """
 
     poses: np.ndarray
@@ -103,6 +106,7 @@ class PoseHypotheses:
     chosen: int
     pose: np.ndarray
     motion_scales: np.ndarray | None = None
+    felt: np.ndarray | None = None
 
     def unexplained_points(self, sensed, tracked) -> np.ndarray:
         """(m, 3) the contact points the chosen hypothesis does not put on the target (the
@@ -314,7 +318,10 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     params = params or HypothesisParams()
     found = search_hypotheses(rng, points, labels, shape, spread=spread, free_space=free_space,
                               params=params)  # fmt: skip
-    return None if found is None else weigh_hypotheses(*found, shape, params)
+    if found is None:
+        return None
+    return dataclasses.replace(weigh_hypotheses(*found, shape, params),
+                               felt=np.asarray(points, dtype=np.float64)[:, :2].copy())
 
 
 def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,

@@ -75,12 +75,31 @@ def footprint_meets(positions, outline, half_planes, poses, shape) -> np.ndarray
     return meets | within.any(axis=2)
 
 
+def felt_meets(positions, felt, half_planes, margin: float) -> np.ndarray:
+    """(S,) whether the footprint at each of ``positions`` (S, 2) holds a point of ``felt``
+    ((o, 2) W) more than ``margin`` (m) inside it: the gripper there would meet what was felt
+    (its half-planes ``half_planes`` as :func:`footprint_outline`'s)."""
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
+    felt = np.asarray(felt, dtype=np.float64).reshape(-1, 2)
+    if len(felt) == 0 or len(positions) == 0:
+        return np.zeros(len(positions), dtype=bool)
+    rel = felt[None, :, :] - positions[:, None, :]  # (S, o, 2)
+    depth = rel @ half_planes[:, :2].T + half_planes[:, 2]  # (S, o, h), <= 0 inside
+    return np.any(np.all(depth <= -margin, axis=-1), axis=1)
+
+
 def probe_outcomes(path, approach_start, normal, travel: float, poses, shape, outline,
-                   half_planes, spacing: float = 0.0025) -> np.ndarray:  # fmt: skip
+                   half_planes, spacing: float = 0.0025, felt=None,
+                   felt_margin: float = 0.005) -> np.ndarray:  # fmt: skip
     """(P,) each posed hypothesis's outcome of one probe: :data:`BUMP` when the footprint meets
     it on the ``path`` ((q, 2) W, sampled travel to the stand-off point), else the distance (m)
     along the approach (from ``approach_start`` along ``-normal``, ``travel`` long) at which it
-    first meets it, inf when it never does."""
+    first meets it, inf when it never does.
+
+    ``felt`` ((o, 2) W, None: none): points where something was felt. Whatever the target's
+    pose, the gripper meets what stands there (:func:`felt_meets`, ``felt_margin`` inside the
+    footprint), so a travel through one bumps under every hypothesis and an approach ends
+    there at the latest: a probe whose outcome is known already gains nothing."""
     steps = np.arange(0.0, travel + 1e-9, spacing)
     approach = np.asarray(approach_start)[None] - steps[:, None] * np.asarray(normal)[None]
     outcomes = np.full(len(poses), np.inf)
@@ -92,6 +111,12 @@ def probe_outcomes(path, approach_start, normal, travel: float, poses, shape, ou
     first = np.argmax(met, axis=1)
     hit = met.any(axis=1)
     outcomes[hit] = steps[first[hit]]
+    if felt is not None:
+        if felt_meets(path, felt, half_planes, felt_margin).any():
+            bumped[:] = True
+        blocked = felt_meets(approach, felt, half_planes, felt_margin)
+        if blocked.any():
+            outcomes = np.minimum(outcomes, steps[np.argmax(blocked)])
     outcomes[bumped] = BUMP
     return outcomes
 
@@ -145,7 +170,7 @@ def face_probe_points(centre, half, yaw: float, footprint, step: float,
 
 def most_informative(candidates, poses, costs, shape, footprint, *,
                      temperature: float, tolerance: float, overshoot: float,
-                     start) -> tuple[float, object, list] | None:  # fmt: skip
+                     start, felt=None) -> tuple[float, object, list] | None:  # fmt: skip
     """The candidate probe of most expected information gain about the hypotheses (``poses``
     (P, 3) W with ``costs`` (P,), tempered by ``temperature``) and its travel, as (gain,
     probe, waypoints); None without candidates.
@@ -158,6 +183,8 @@ def most_informative(candidates, poses, costs, shape, footprint, *,
         tolerance: approach distances (m) counting as one outcome.
         overshoot: how far (m) past the probed face the approach goes.
         start: (2,) where the gripper is (W).
+        felt: (o, 2) points where something was felt (W; None: none), met by the gripper
+            under every hypothesis (:func:`probe_outcomes`).
     """
     outline, half_planes = footprint_outline(footprint)
     weights = cost_weights(costs, temperature)
@@ -170,12 +197,12 @@ def most_informative(candidates, poses, costs, shape, footprint, *,
         support = float(np.max(np.asarray(footprint) @ -np.asarray(probe.normal)))
         travel = float((far - probe.point) @ probe.normal) - support + overshoot
         outcomes = probe_outcomes(path, far, probe.normal, travel, poses, shape, outline,
-                                  half_planes)  # fmt: skip
+                                  half_planes, felt=felt)  # fmt: skip
         gain = outcome_entropy(outcomes, weights, tolerance)
         if best is None or gain > best[0] + 1e-9:
             best = (gain, probe, waypoints)
     return best
 
 
-__all__ = ["BUMP", "face_probe_points", "footprint_meets", "footprint_outline", "most_informative",
-           "outcome_entropy", "probe_outcomes"]
+__all__ = ["BUMP", "face_probe_points", "felt_meets", "footprint_meets", "footprint_outline",
+           "most_informative", "outcome_entropy", "probe_outcomes"]

@@ -88,6 +88,11 @@ class ProbeParams:
             end face where a turned box would stand is among them. None (the default): the
             probes :func:`plan_probes` makes of each, as every folder before the development
             layouts' thirty-first look.
+        felt_obstacles: with ``discriminate``, every hypothesis's outcome of a probe counts
+            what was felt as standing where it was felt (the hypotheses' ``felt`` points):
+            a probe through it, whose outcome is known already, gains nothing. Off (the
+            default): only the posed target is met, as every folder before the development
+            layouts' thirty-second look.
     """
 
     standoff: float = 0.02
@@ -111,6 +116,7 @@ class ProbeParams:
     max_probes: int = 6
     extent_margin: bool = False
     face_step: float | None = None
+    felt_obstacles: bool = False
 
     def __post_init__(self):
         if self.face_step is not None and not self.face_step > 0:
@@ -356,10 +362,11 @@ class FaceProbePolicy:
                     candidates.append((probe, *route))
         if p.face_step is not None:  # of equal gains, the nearest
             candidates.sort(key=lambda c: _path_length([xy, *c[2]]))
+        felt = getattr(hypotheses, "felt", None) if p.felt_obstacles else None
         best = most_informative(candidates, poses, np.asarray(hypotheses.costs)[rivals],
                                 self.shape, self.footprint, temperature=p.rival_temperature,
                                 tolerance=p.outcome_tolerance, overshoot=p.overshoot,
-                                start=xy)  # fmt: skip
+                                start=xy, felt=felt)  # fmt: skip
         if best is None or best[0] < p.min_gain:
             return False
         self._probe, self._waypoints, self._phase = best[1], best[2], "travel"
