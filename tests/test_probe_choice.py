@@ -17,7 +17,8 @@ from stucco_drake.core.probe_choice import (
     outcome_entropy,
     probe_outcomes,
 )
-from stucco_drake.core.probing import FaceProbePolicy, ProbeParams
+from stucco_drake.core.probe_params import ProbeParams
+from stucco_drake.core.probing import FaceProbePolicy
 from stucco_drake.core.shapes import BoxSdf
 
 # A box 6 cm by 15.8 cm in plan (m), and a square gripper footprint 8 cm on a side.

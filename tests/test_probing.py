@@ -8,8 +8,9 @@ import itertools
 import numpy as np
 import pytest
 
+from stucco_drake.core.probe_params import ProbeParams
 from stucco_drake.core.probe_paths import travel_waypoints
-from stucco_drake.core.probing import FaceProbePolicy, ProbeParams, plan_probes
+from stucco_drake.core.probing import FaceProbePolicy, plan_probes
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
 # A cracker box standing up: 6 cm across its long faces, 15.8 cm along them (m).

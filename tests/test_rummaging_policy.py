@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from stucco_drake.core.coverage import CoverageParams
-from stucco_drake.core.probing import ProbeParams
+from stucco_drake.core.probe_params import ProbeParams
 from stucco_drake.core.rummage_params import RummageParams
 
 # IB's prescribed actions 12-14 push the box (a development layout's log shows it); the

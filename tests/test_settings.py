@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from stucco_drake.core.probing import ProbeParams
+from stucco_drake.core.probe_params import ProbeParams
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.settings import plain_settings, settings_changes, settings_with
 

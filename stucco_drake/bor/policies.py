@@ -1,6 +1,6 @@
 """What chooses the BOR Diagram's actions besides a scene's prescribed script.
 
-- :class:`~stucco_drake.core.probing.ProbeParams`: the prescribed actions, then guarded probes
+- :class:`~stucco_drake.core.probe_params.ProbeParams`: the prescribed actions, then guarded probes
   where the target's pose hypotheses disagree, then of its likeliest pose (``--policy probe``).
 - :class:`~stucco_drake.core.rummage_params.RummageParams`: rummaging chosen from the belief from
   the first action, stopping once the target is known (``--policy belief``).
@@ -21,8 +21,9 @@ from pydrake.systems.framework import DiagramBuilder
 from stucco_drake.bor.grasp import build_grasp_scene
 from stucco_drake.core.coverage import CoverageParams, coverage_waypoints, waypoint_steps
 from stucco_drake.core.penetration import RobotPenetration
+from stucco_drake.core.probe_params import ProbeParams
 from stucco_drake.core.probe_paths import gripper_footprint
-from stucco_drake.core.probing import FaceProbePolicy, ProbeParams
+from stucco_drake.core.probing import FaceProbePolicy
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.rummaging import BeliefRummagingPolicy
 from stucco_drake.robot.gripper_sdf import gripper_penetration

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from stucco_drake.bor import log as bor_log
 from stucco_drake.core.coverage import CoverageParams
-from stucco_drake.core.probing import ProbeParams
+from stucco_drake.core.probe_params import ProbeParams
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.sets import scene_set

@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 from stucco_drake.core.coverage import CoverageParams
-from stucco_drake.core.probing import ProbeParams
+from stucco_drake.core.probe_params import ProbeParams
 
 
 @dataclasses.dataclass(frozen=True)
