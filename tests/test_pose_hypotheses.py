@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from stucco_drake.core.free_space import FreeSpace
 from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.icp import rotations
 from stucco_drake.core.pose_hypotheses import (
-    FreeSpace,
     PoseHypotheses,
     point_spread,
     pose_hypotheses,

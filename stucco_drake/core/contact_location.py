@@ -91,7 +91,7 @@ def contact_location_costs(poses, explained, fill, points, grippers, directions,
 def location_costs_of(free, fill, points, carried, noise: float | None):
     """The function ``(poses, explained) -> (B,) costs`` of :func:`contact_location_costs`
     for the contact ``points`` (n, 3) the robot sensed at ``free``'s configs
-    (:class:`~stucco_drake.core.pose_hypotheses.FreeSpace`), each carried by ``carried``
+    (:class:`~stucco_drake.core.free_space.FreeSpace`), each carried by ``carried``
     (n, 3; None: not at all) since (the gripper that met it is carried alike), the target's
     cross-section
     ``fill`` ((m, 2) in O); None when ``noise`` is None or no point was met by a push."""

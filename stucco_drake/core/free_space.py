@@ -14,6 +14,10 @@ config of action a or later. A pose hypothesis last touched in action a then loo
 cross-section's points in layer a: a few array lookups per point instead of a penetration query
 per (config, point) pair. Units: m; world frame W; the robot's geometry in its end-effector
 frame E.
+
+:class:`FreeSpace` is what the target-pose hypotheses are given of where the robot went, and
+:func:`free_space_costs` their cost of a pose whose cross-section lay inside the robot there
+(:mod:`~stucco_drake.core.pose_hypotheses`).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import dataclasses
 
 import numpy as np
 
+from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.penetration import RobotPenetration, deep_box_corners
 
 #: Raster cells (configs x footprint) evaluated per block: bounds scratch memory.
@@ -143,4 +148,66 @@ def _footprint_reach(penetration: RobotPenetration, rotation):
     return -corners[:, :2].min(axis=0), corners[:, :2].max(axis=0)
 
 
-__all__ = ["SweptSlice", "swept_configs"]
+@dataclasses.dataclass(frozen=True)
+class FreeSpace:
+    """Where the robot has been: its pxpen and the end-effector configs, oldest first.
+
+    Attributes:
+        penetration: the robot's pxpen.
+        positions: (k, 3) end-effector origins in W (m), one per action (at its end), oldest
+            first.
+        rotation: (3, 3) R_WE shared by all configs (None: identity).
+        point_steps: (n,) index into ``positions`` of the config at which each contact point
+            was sensed (the point's action).
+        free_actions: (k,) whether each action sensed no contact: its straight path from the
+            previous action's end is swept (see :mod:`~stucco_drake.core.free_space`); None:
+            only the configs at the actions' ends count.
+    """
+
+    penetration: RobotPenetration
+    positions: np.ndarray
+    rotation: np.ndarray | None
+    point_steps: np.ndarray
+    free_actions: np.ndarray | None = None
+
+
+def swept_slice(free: FreeSpace | None, height: float,
+                params: HypothesisParams) -> SweptSlice | None:  # fmt: skip
+    """The robot's free space on the slice at ``height`` (m) since each action, or None
+    without any config."""
+    if free is None or len(free.positions) == 0:
+        return None
+    flags = (np.zeros(len(free.positions), dtype=bool) if free.free_actions is None
+             else free.free_actions)  # fmt: skip
+    configs, actions = swept_configs(free.positions, flags, params.sweep_spacing)
+    return SweptSlice.build(free.penetration, configs, actions, len(free.positions),
+                            free.rotation, height, params.raster_resolution)  # fmt: skip
+
+
+def free_space_costs(poses, explained, swept: SweptSlice | None, point_steps, fill,
+                     params: HypothesisParams) -> np.ndarray:  # fmt: skip
+    """(B,) free-space cost of each pose, its cross-section ``fill`` ((m, 2) in O) posed on
+    the slice: the depth beyond ``free_space_tolerance`` to which each of its points lay
+    inside the robot at any config since the last action that sensed a point the pose
+    explains (all configs when it explains none), summed over the points, per
+    ``free_space_scale``."""
+    if swept is None:
+        return np.zeros(len(poses))
+    steps = np.where(explained, np.asarray(point_steps)[None], -1).max(axis=1)
+    since = np.maximum(steps, 0)
+    costs = np.empty(len(poses))
+    block = max(1, (1 << 20) // len(fill))
+    for k in range(0, len(poses), block):
+        x, y, yaw = poses[k:k + block, :, None].transpose(1, 0, 2)
+        c, s = np.cos(yaw), np.sin(yaw)
+        # The posed fill, R(yaw) f + (x, y), as two (b, m) planes (cheaper than a (b, m, 2)
+        # einsum, and all a nearest-cell lookup needs).
+        posed = np.stack([c * fill[:, 0] - s * fill[:, 1] + x,
+                          s * fill[:, 0] + c * fill[:, 1] + y], axis=-1)  # fmt: skip
+        depth = swept.depth(posed, since[k:k + block, None])
+        excess = np.maximum(depth - params.free_space_tolerance, 0.0)
+        costs[k:k + block] = excess.sum(axis=1) / params.free_space_scale
+    return costs
+
+
+__all__ = ["FreeSpace", "SweptSlice", "free_space_costs", "swept_configs", "swept_slice"]

@@ -29,8 +29,8 @@ import dataclasses
 
 import numpy as np
 
+from stucco_drake.core.free_space import FreeSpace
 from stucco_drake.core.pose_hypotheses import (
-    FreeSpace,
     HypothesisParams,
     PoseHypotheses,
     search_hypotheses,

@@ -40,39 +40,15 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from stucco_drake.core.contact_location import location_costs_of
-from stucco_drake.core.free_space import SweptSlice, swept_configs
+from stucco_drake.core.free_space import FreeSpace, free_space_costs, swept_slice
 from stucco_drake.core.grasp_choice import choose_grasp
 from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.hypothesis_weights import cost_weights, tempered_confidence
 from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
-from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_penetration import sample_cross_section
 from stucco_drake.core.segment_extent import outline_extent, split_wider_segments, xy_extent
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.validation import as_finite_array
-
-
-@dataclasses.dataclass(frozen=True)
-class FreeSpace:
-    """Where the robot has been: its pxpen and the end-effector configs, oldest first.
-
-    Attributes:
-        penetration: the robot's pxpen.
-        positions: (k, 3) end-effector origins in W (m), one per action (at its end), oldest
-            first.
-        rotation: (3, 3) R_WE shared by all configs (None: identity).
-        point_steps: (n,) index into ``positions`` of the config at which each contact point
-            was sensed (the point's action).
-        free_actions: (k,) whether each action sensed no contact: its straight path from the
-            previous action's end is swept (see :mod:`~stucco_drake.core.free_space`); None:
-            only the configs at the actions' ends count.
-    """
-
-    penetration: RobotPenetration
-    positions: np.ndarray
-    rotation: np.ndarray | None
-    point_steps: np.ndarray
-    free_actions: np.ndarray | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,45 +127,6 @@ def contact_costs(poses, points, sigma, shape, params: HypothesisParams):
     elsewhere = params.other_object_cost + np.minimum(d, 0.0) ** 2 / (2.0 * sigma**2)
     explained = on_surface < elsewhere
     return np.minimum(on_surface, elsewhere).sum(axis=1), explained
-
-
-def swept_slice(free: FreeSpace | None, height: float,
-                params: HypothesisParams) -> SweptSlice | None:  # fmt: skip
-    """The robot's free space on the slice at ``height`` (m) since each action, or None
-    without any config."""
-    if free is None or len(free.positions) == 0:
-        return None
-    flags = (np.zeros(len(free.positions), dtype=bool) if free.free_actions is None
-             else free.free_actions)  # fmt: skip
-    configs, actions = swept_configs(free.positions, flags, params.sweep_spacing)
-    return SweptSlice.build(free.penetration, configs, actions, len(free.positions),
-                            free.rotation, height, params.raster_resolution)  # fmt: skip
-
-
-def free_space_costs(poses, explained, swept: SweptSlice | None, point_steps, fill,
-                     params: HypothesisParams) -> np.ndarray:  # fmt: skip
-    """(B,) free-space cost of each pose, its cross-section ``fill`` ((m, 2) in O) posed on
-    the slice: the depth beyond ``free_space_tolerance`` to which each of its points lay
-    inside the robot at any config since the last action that sensed a point the pose
-    explains (all configs when it explains none), summed over the points, per
-    ``free_space_scale``."""
-    if swept is None:
-        return np.zeros(len(poses))
-    steps = np.where(explained, np.asarray(point_steps)[None], -1).max(axis=1)
-    since = np.maximum(steps, 0)
-    costs = np.empty(len(poses))
-    block = max(1, (1 << 20) // len(fill))
-    for k in range(0, len(poses), block):
-        x, y, yaw = poses[k:k + block, :, None].transpose(1, 0, 2)
-        c, s = np.cos(yaw), np.sin(yaw)
-        # The posed fill, R(yaw) f + (x, y), as two (b, m) planes (cheaper than a (b, m, 2)
-        # einsum, and all a nearest-cell lookup needs).
-        posed = np.stack([c * fill[:, 0] - s * fill[:, 1] + x,
-                          s * fill[:, 0] + c * fill[:, 1] + y], axis=-1)  # fmt: skip
-        depth = swept.depth(posed, since[k:k + block, None])
-        excess = np.maximum(depth - params.free_space_tolerance, 0.0)
-        costs[k:k + block] = excess.sum(axis=1) / params.free_space_scale
-    return costs
 
 
 def grid_candidates(points, sigma, shape, params: HypothesisParams, swept=None,

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from stucco_drake.core.free_space import FreeSpace
 from stucco_drake.core.grasp_choice import grasp_at, grasp_closes
 from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline, transform
 from stucco_drake.core.motion_scale import MOTION_SCALES, motion_scaled_hypotheses
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_hypotheses import (
-    FreeSpace,
     HypothesisParams,
     PoseHypotheses,
 )

@@ -10,10 +10,11 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
+from stucco_drake.core.free_space import FreeSpace
 from stucco_drake.core.motion_scale import MOTION_SCALES, motion_scaled_hypotheses
 from stucco_drake.core.observation import ActionContacts
 from stucco_drake.core.penetration import RobotPenetration
-from stucco_drake.core.pose_hypotheses import FreeSpace, HypothesisParams, pose_hypotheses
+from stucco_drake.core.pose_hypotheses import HypothesisParams, pose_hypotheses
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.core.target_pose import (
     TOUCH_TOLERANCE,
