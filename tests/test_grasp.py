@@ -83,3 +83,25 @@ def test_geometric_check_box_and_can():
     assert geometric_check(X_WO, gripper(0.0, 0.03, 0.0), TOMATO_CAN)[0]
     assert not geometric_check(X_WO, gripper(0.0, 0.05, 0.0), TOMATO_CAN)[0]
     assert not geometric_check(X_WO, gripper(0.05, 0.0, 0.0), TOMATO_CAN)[0]
+
+
+def test_fb_slide_stopped_by_the_box_tries_the_next_approach():
+    """The first attempt descends 16 cm beside the box along its closing axis (its short one;
+    the open fingers span 20 cm with their plates, so the inner one lands 3 cm clear of the
+    long face, 3.3 cm from the centre) and slides to the grasp point, which drives that finger
+    into the long face. Guarded, the slide counts as blocked (it trails its reference by more
+    than 3 cm) and the next attempt, straight down, lifts the box; given that first approach
+    alone, the slide shoves the box over (it ends about 13 cm off and 7 cm lower) and nothing
+    is lifted."""
+    scene = load_scene("FB")
+    built = build_grasp_scene(scene)
+    plant_context = built.plant.GetMyContextFromRoot(make_simulator(built).get_context())
+    X_WO = built.free_bodies[scene.target].EvalPoseInWorld(plant_context)
+    across = X_WO.rotation().matrix()[:2, 0]  # the box's short axis in the world's plane
+    beside = 0.16 * across / np.linalg.norm(across)
+    guarded = _grasp("FB", CRACKER_BOX, approach_offsets=[beside, (0.0, 0.0)])
+    assert guarded.attempts == 2, guarded.reason
+    assert guarded.success, guarded.reason
+    alone = _grasp("FB", CRACKER_BOX, approach_offsets=[beside])
+    assert alone.attempts == 1
+    assert not alone.success, alone.reason

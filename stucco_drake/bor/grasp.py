@@ -56,7 +56,7 @@ class GraspResult:
         final_pose: the target's true (x, y, z, yaw) at the end (m, rad, world).
         reason: why it failed (or "ok"), with the numbers.
         sim_time: simulated duration of the grasp (s); wall_time: its wall-clock time (s).
-        attempts: descents made (more than one when a descent was blocked and another
+        attempts: descents made (more than one when a descent or a slide was blocked and another
             closing yaw or approach was tried).
     """
 
@@ -283,7 +283,7 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
                    approach_offsets=offsets)  # fmt: skip
     t0, wall0 = context.get_time(), time.perf_counter()
 
-    # A blocked descent starts a new attempt, which restarts the phase clock.
+    # A blocked descent or slide starts a new attempt, which restarts the phase clock.
     attempt = -1
     while attempt != executor.attempt(executor_context)[0]:
         attempt, t_attempt = executor.attempt(executor_context)

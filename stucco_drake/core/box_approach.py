@@ -8,9 +8,10 @@ axis, and slide along it to the grasp point, shoving aside what stands beside th
 (the box, heavier, stays between them). Which end: the one whose descent keeps the fingers
 farthest from the points the robot felt on other objects; ends clear of them all by
 ``clearance``, the one nearer the gripper (it came from there, through space it swept). When
-that descent is blocked, the straight one onto the grasp point comes next, and the other end
-last: it lies on the side the robot has explored least (behind the box, seen from where it
-rummaged; on the development layouts of every family a finger's spot there is taken).
+that descent, or the slide after it, is blocked, the straight one onto the grasp point comes
+next, and the other end last: it lies on the side the robot has explored least (behind the
+box, seen from where it rummaged; on the development layouts of every family a finger's spot
+there is taken).
 Pure numpy; world frame, metres and radians.
 """
 

@@ -64,7 +64,8 @@ class HypothesisParams:
         box_approach: how the grasp of a box goes down: ``"top"`` straight onto the grasp
             point; ``"end"`` beyond the end whose descent keeps the open fingers off the
             clutter felt, then sliding along the box to the grasp point (straight down, then
-            the other end, when a descent is blocked: :mod:`~stucco_drake.core.box_approach`).
+            the other end, when a descent or a slide is blocked:
+            :mod:`~stucco_drake.core.box_approach`).
     """
 
     contact_noise: float = 0.004

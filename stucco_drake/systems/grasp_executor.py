@@ -19,7 +19,10 @@ clock, the phases listed in :data:`PHASES`:
 5. ``slide``: at the grasp height, slide from where the descent ended to the grasp point, the
    open fingers either side of the target (a box approached along its long axis from beyond
    an end: the fingers shove aside what stands beside its long faces, where a descent from
-   above would land on it). An attempt without an offset skips it (it lasts 0 s);
+   above would land on it). An attempt without an offset skips it (it lasts 0 s). The slide is
+   guarded as the descent is: when the measured gripper trails the reference by more than
+   ``slide_tolerance`` across the table (something stops the fingers short of the grasp
+   point), the next attempt, if any, starts;
 6. ``close``: close the fingers (see ``close_position``: a command beyond the closed stop, so the
    joint controller keeps squeezing once the bubbles touch the object);
 7. ``lift``: raise the gripper by ``lift``;
@@ -94,17 +97,20 @@ class GraspExecutor(LeafSystem):
         block_tolerance: how far (m) the measured gripper height may trail the reference
             during ``descend`` before the descent counts as blocked. A free descent trails by
             at most 3 mm (TC's can); a finger landing on a box top, by 9 cm.
+        slide_tolerance: how far (m) the measured gripper may trail the reference across the
+            table during ``slide`` before the slide counts as blocked.
     """
 
     def __init__(self, robot_plant, arm_instance, gripper_frame, *, period: float = 0.01,
                  gain: float = 10.0, open_position: float = 0.055,
                  close_position: float = -0.35, lift: float = 0.1, durations=DURATIONS,
-                 block_tolerance: float = 0.015):
+                 block_tolerance: float = 0.015, slide_tolerance: float = 0.03):
         super().__init__()
         self._kin = ArmKinematics(robot_plant, arm_instance, gripper_frame)
         self._nq, self._nv = robot_plant.num_positions(), robot_plant.num_velocities()
         self._period, self._gain = float(period), float(gain)
         self._block_tolerance = float(block_tolerance)
+        self._slide_tolerance = float(slide_tolerance)
         self._open, self._close, self._lift = float(open_position), float(close_position), lift
         self._durations = np.asarray(durations, dtype=float)
         if len(self._durations) != len(PHASES):
@@ -157,8 +163,9 @@ class GraspExecutor(LeafSystem):
                 (mod pi, the fingers are symmetric) nearest the current one is used.
             z_safe: height of the gripper frame for the transit (m, world).
             z_grasp: height of the gripper frame when closing (m, world).
-            retry_yaws: closing yaws (rad, world) of the attempts after a blocked descent,
-                at most ``MAX_ATTEMPTS - 1``; without them a blocked descent keeps pressing on.
+            retry_yaws: closing yaws (rad, world) of the attempts after a blocked descent or
+                slide, at most ``MAX_ATTEMPTS - 1``; without them a blocked descent keeps
+                pressing on.
             approach_offsets: per attempt (the first, then one per retry yaw), the offset
                 (dx, dy) (m, world) from ``grasp_xy`` where it descends before sliding to
                 ``grasp_xy`` (``slide``); None: every attempt descends onto ``grasp_xy``.
@@ -261,6 +268,19 @@ class GraspExecutor(LeafSystem):
             pose_rate[2] = 2 * z_slope / durations[k] * (b[2] - a[2])
         return pose, pose_rate, f, rate * (fingers[k + 1] - fingers[k]), k
 
+    def _blocked(self, context, s, t: float, phase: int):
+        """The measured robot positions when the descent (height) or the slide (across the
+        table) trails its reference by more than its tolerance and an attempt is left, else
+        None."""
+        if phase not in (_DESCEND, _SLIDE) or s[_ATTEMPT] + 1 >= s[_N_YAWS]:
+            return None
+        q_measured = self.get_input_port(1).Eval(context)[:self._nq]
+        self._kin.set_positions(q_measured)
+        lag = self._kin.pose().translation() - self._reference(s, t - self._period)[0][:3]
+        if phase == _DESCEND:
+            return q_measured if lag[2] > self._block_tolerance else None
+        return q_measured if np.hypot(*lag[:2]) > self._slide_tolerance else None
+
     def _update(self, context, discrete_state):
         s = context.get_discrete_state(self._state).value()
         if s[_MODE] == 0.0:
@@ -268,16 +288,13 @@ class GraspExecutor(LeafSystem):
         # Reference at the end of this update's interval (the command holds until then).
         t = context.get_time() - s[_T0] + self._period
         pose, rate, f, f_rate, phase = self._reference(s, t)
-        if phase == _DESCEND and s[_ATTEMPT] + 1 < s[_N_YAWS]:
-            q_measured = self.get_input_port(1).Eval(context)[:self._nq]
-            self._kin.set_positions(q_measured)
-            z_reference = self._reference(s, t - self._period)[0][2]
-            if self._kin.pose().translation()[2] - z_reference > self._block_tolerance:
-                new, v_state = self._attempt(s, int(s[_ATTEMPT]) + 1, q_measured,
-                                             context.get_time())  # fmt: skip
-                discrete_state.set_value(self._state, new)
-                discrete_state.set_value(self._v_state, v_state)
-                return
+        q_measured = self._blocked(context, s, t, phase)
+        if q_measured is not None:
+            new, v_state = self._attempt(s, int(s[_ATTEMPT]) + 1, q_measured,
+                                         context.get_time())  # fmt: skip
+            discrete_state.set_value(self._state, new)
+            discrete_state.set_value(self._v_state, v_state)
+            return
         X_des = RigidTransform(gripper_rotation(pose[3]), pose[:3])
         q = s[_Q]
         q_full = self.get_input_port(0).Eval(context)[:self._nq].copy()
