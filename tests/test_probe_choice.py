@@ -102,6 +102,18 @@ class Hypotheses:
     felt: np.ndarray | None = None
 
 
+def planned_outcomes(policy, poses, path=None, felt=None) -> np.ndarray:
+    """Each of ``poses``'s outcome of the probe ``policy`` has just planned: its approach from
+    the travel's last waypoint, as far as the policy goes past the face (``path``, the travel
+    to check for bumps: None for none)."""
+    probe, far = policy._probe, policy._waypoints[-1]
+    support = float(np.max(FOOTPRINT @ -probe.normal))
+    travel = float((far - probe.point) @ probe.normal) - support + policy.params.overshoot
+    outline, planes = footprint_outline(FOOTPRINT)
+    return probe_outcomes(np.zeros((0, 2)) if path is None else path, far, probe.normal,
+                          travel, poses, BOX, outline, planes, felt=felt)  # fmt: skip
+
+
 def test_of_two_rival_poses_the_policy_probes_where_they_differ():
     """The likelier pose (cost 0) has the box's long axis along x (x in [0.121, 0.279], y in
     [-0.03, 0.03]), its rival (cost 2) along y (x in [0.14, 0.2], y in [-0.03, 0.128]): their
@@ -113,17 +125,11 @@ def test_of_two_rival_poses_the_policy_probes_where_they_differ():
     rival = np.array([0.17, 0.049, 0.0])
     hypotheses = Hypotheses(np.array([likely, rival]), np.array([0.0, 2.0]), likely)
     start = np.array([0.2, -0.3])
-    outline, planes = footprint_outline(FOOTPRINT)
     for discriminate in (False, True):
         params = ProbeParams(discriminate=discriminate, direct_only=False)
         policy = FaceProbePolicy(BOX, FOOTPRINT, max_step=0.03, params=params)
         assert policy.next_step(start, False, hypotheses) is not None
-        probe = policy._probe
-        far = policy._waypoints[-1]
-        support = float(np.max(FOOTPRINT @ -probe.normal))
-        travel = float((far - probe.point) @ probe.normal) - support + params.overshoot
-        outcomes = probe_outcomes(np.zeros((0, 2)), far, probe.normal, travel,
-                                  hypotheses.poses, BOX, outline, planes)  # fmt: skip
+        outcomes = planned_outcomes(policy, hypotheses.poses)
         differ = (np.isfinite(outcomes).sum() == 1
                   or abs(outcomes[0] - outcomes[1]) >= params.outcome_tolerance)
         assert differ == discriminate, (discriminate, outcomes)
@@ -164,16 +170,11 @@ def test_touches_along_the_face_tell_an_end_on_box_from_a_turned_one():
     end_on = np.array([0.2, 0.0, np.pi / 2])
     turned = np.array([0.151, 0.0, 0.0])
     hypotheses = Hypotheses(np.array([end_on, turned]), np.array([0.0, 0.0]), end_on)
-    outline, planes = footprint_outline(FOOTPRINT)
     for face_step in (None, 0.02):
         params = ProbeParams(face_step=face_step)
         policy = FaceProbePolicy(BOX, FOOTPRINT, max_step=0.03, params=params)
         assert policy.next_step(np.zeros(2), False, hypotheses) is not None
-        probe, far = policy._probe, policy._waypoints[-1]
-        support = float(np.max(FOOTPRINT @ -probe.normal))
-        travel = float((far - probe.point) @ probe.normal) - support + params.overshoot
-        outcomes = probe_outcomes(np.zeros((0, 2)), far, probe.normal, travel,
-                                  hypotheses.poses, BOX, outline, planes)  # fmt: skip
+        outcomes = planned_outcomes(policy, hypotheses.poses)
         met = np.isfinite(outcomes)
         if face_step is None:
             assert met.all() and abs(outcomes[0] - outcomes[1]) < params.outcome_tolerance
@@ -188,19 +189,14 @@ def test_a_probe_whose_outcome_was_felt_already_is_not_chosen():
     where the two poses' outcomes still differ with the felt point standing where it is."""
     end_on = np.array([0.2, 0.0, np.pi / 2])
     turned = np.array([0.151, 0.0, 0.0])
-    outline, planes = footprint_outline(FOOTPRINT)
 
     def first_probe(felt_obstacles, felt):
         hypotheses = Hypotheses(np.array([end_on, turned]), np.zeros(2), end_on, felt)
         params = ProbeParams(face_step=0.02, felt_obstacles=felt_obstacles)
         policy = FaceProbePolicy(BOX, FOOTPRINT, max_step=0.03, params=params)
         assert policy.next_step(np.zeros(2), False, hypotheses) is not None
-        probe, far = policy._probe, policy._waypoints[-1]
-        support = float(np.max(FOOTPRINT @ -probe.normal))
-        travel = float((far - probe.point) @ probe.normal) - support + params.overshoot
         path = np.array([np.zeros(2), *policy._waypoints])
-        return probe, probe_outcomes(path, far, probe.normal, travel, hypotheses.poses, BOX,
-                                     outline, planes, felt=felt)  # fmt: skip
+        return policy._probe, planned_outcomes(policy, hypotheses.poses, path, felt)
 
     plain, _ = first_probe(False, None)
     # Where the touch made without anything felt first meets the turned box: the turned
