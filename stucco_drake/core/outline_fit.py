@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from stucco_drake.core.icp import cross_section_sdf, rotations
+from stucco_drake.core.icp import cross_section_sdf, rotations, to_pose_frames
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
 
@@ -64,7 +64,7 @@ def shape_sse(points_xy, poses, shape: BoxSdf | CylinderSdf) -> tuple[float, flo
         # Points in the pose's frame O: R^T (p - t), as row vectors.
         return sdf((points_xy - pose[None, :2]) @ rotations(pose[2]))
 
-    local = np.einsum("bni,bij->bnj", points_xy[None] - poses[:, None, :2], rotations(poses[:, 2]))
+    local = to_pose_frames(poses, points_xy)
     sse = np.sum(sdf(local.reshape(-1, 2)).reshape(len(poses), -1) ** 2, axis=1)
     # Point-to-point ICP against a sampled outline stops short of the exact optimum (slow
     # sliding, 2 mm samples), which would count against a genuine target; polish the best

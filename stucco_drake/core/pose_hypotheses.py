@@ -44,7 +44,13 @@ from stucco_drake.core.free_space import FreeSpace, free_space_costs, swept_slic
 from stucco_drake.core.grasp_choice import choose_grasp
 from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.hypothesis_weights import cost_weights, tempered_confidence
-from stucco_drake.core.icp import cross_section_sdf, icp_2d, rotations, sample_outline, transform
+from stucco_drake.core.icp import (
+    cross_section_sdf,
+    icp_2d,
+    sample_outline,
+    to_pose_frames,
+    transform,
+)
 from stucco_drake.core.pose_penetration import sample_cross_section
 from stucco_drake.core.segment_extent import outline_extent, split_wider_segments, xy_extent
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
@@ -120,9 +126,7 @@ def tracker_spread(tracker) -> np.ndarray | None:
 
 def contact_costs(poses, points, sigma, shape, params: HypothesisParams):
     """(B,) contact cost of each pose and (B, n) which points it explains (see the module)."""
-    local = np.einsum("bni,bij->bnj", points[None, :, :2] - poses[:, None, :2],
-                      rotations(poses[:, 2]))  # fmt: skip
-    d = cross_section_sdf(shape)(local)
+    d = cross_section_sdf(shape)(to_pose_frames(poses, points[:, :2]))
     on_surface = d**2 / (2.0 * sigma**2) + np.log(sigma / params.contact_noise)
     elsewhere = params.other_object_cost + np.minimum(d, 0.0) ** 2 / (2.0 * sigma**2)
     explained = on_surface < elsewhere
@@ -203,8 +207,7 @@ def _outline_gaps(distance, outline, poses_a, poses_b) -> np.ndarray:
     own frame): for two poses of one shape, their outlines' Hausdorff distance up to the
     outline's sampling when taken both ways."""
     posed = transform(poses_b, outline)
-    local = np.einsum("pmi,pij->pmj", posed - poses_a[:, None, :2], rotations(poses_a[:, 2]))
-    return np.abs(distance(local)).max(axis=1)
+    return np.abs(distance(to_pose_frames(poses_a, posed))).max(axis=1)
 
 
 def _agreement(distance, outline, poses_a, poses_b) -> np.ndarray:
