@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stucco_drake.core.icp import rotations
+from stucco_drake.core.icp import transform
 from stucco_drake.core.probe_paths import gripper_footprint
 
 #: Depth (m) of the band of cross-section cells nearest ahead of the gripper that count as
@@ -57,7 +57,7 @@ def lateral_offsets(poses, fill, points, grippers, directions, footprint) -> np.
     v = np.column_stack([-u[:, 1], u[:, 0]])
     lateral = np.asarray(footprint, dtype=np.float64) @ v.T  # (f, n)
     low, high = lateral.min(axis=0), lateral.max(axis=0)
-    posed = np.einsum("bij,mj->bmi", rotations(poses[:, 2]), fill) + poses[:, None, :2]
+    posed = transform(poses, fill)
     relative = posed[:, None, :, :] - np.asarray(grippers)[None, :, None, :2]  # (B, n, m, 2)
     along = np.einsum("bnmi,ni->bnm", relative, u)
     across = np.einsum("bnmi,ni->bnm", relative, v)

@@ -27,7 +27,13 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from stucco_drake.core.hypothesis_weights import cost_weights
-from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline
+from stucco_drake.core.icp import (
+    cross_section_sdf,
+    rotations,
+    sample_outline,
+    to_pose_frames,
+    transform,
+)
 
 #: Outcome of a hypothesis under which the gripper meets the target before the approach.
 BUMP = -1.0
@@ -63,13 +69,12 @@ def footprint_meets(positions, outline, half_planes, poses, shape) -> np.ndarray
     distance = cross_section_sdf(shape)
     # The footprint's boundary in each target frame: (P, S, m, 2).
     posed = positions[:, None, :] + outline[None, :, :]
-    local = np.einsum("psmi,pij->psmj", posed[None] - poses[:, None, None, :2],
-                      rotations(poses[:, 2]))  # fmt: skip
-    inside = distance(local.reshape(len(poses), -1, 2)).reshape(local.shape[:3]) < 0.0
+    local = to_pose_frames(poses, posed.reshape(-1, 2))
+    inside = distance(local).reshape(len(poses), *posed.shape[:2]) < 0.0
     meets = inside.any(axis=2)
     # The target's outline in the footprint's frame: (P, S, k, 2).
     target = sample_outline(shape, 0.005)
-    world = np.einsum("kj,pij->pki", target, rotations(poses[:, 2])) + poses[:, None, :2]
+    world = transform(poses, target)
     rel = world[:, None, :, :] - positions[None, :, None, :]
     within = np.all(rel @ half_planes[:, :2].T + half_planes[:, 2] <= 0.0, axis=-1)
     return meets | within.any(axis=2)
