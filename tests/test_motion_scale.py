@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from stucco_drake.core.free_space import FreeSpace
 from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.icp import rotations
 from stucco_drake.core.motion_scale import motion_scaled_hypotheses
@@ -79,6 +80,25 @@ def test_a_pushed_box_is_found_where_the_tracker_followed_it():
     position, yaw = _error(found.pose)
     assert position < 0.004 and yaw < np.radians(2.0), (position, np.degrees(yaw))
     assert found.motion_scales[found.chosen] == 1.0
+
+
+def test_free_space_is_judged_where_the_points_were_sensed_once_for_every_scale(
+        disc_penetration):  # fmt: skip
+    """The tracker carried the points 3 cm up as well as along (a contact-motion model's
+    vertical part; objects slide on the table): every scale is judged on one slice of the free
+    space, at the sensed points' mean height, built once."""
+    rng = np.random.default_rng(2)
+    sensed = _world(_two_faces(), TRUE_POSE, rng)
+    tracked = sensed + np.array([0.01, 0.0, 0.03])
+    labels = np.zeros(len(sensed), dtype=np.int64)
+    configs = np.array([[0.3, -0.1, HEIGHT], [0.3, 0.3, HEIGHT]])
+    free = FreeSpace(disc_penetration, configs, None, np.zeros(len(sensed), dtype=np.int64))
+    found = motion_scaled_hypotheses(np.random.default_rng(3), sensed, tracked, labels, BOX,
+                                     free_space=free)  # fmt: skip
+    assert set(found.motion_scales) == {0.0, 0.25, 0.5, 0.75, 1.0}
+    assert len(free.slices) == 1
+    (height, *_), = free.slices
+    assert height == pytest.approx(HEIGHT, abs=1e-12)  # not HEIGHT + 0.03 x scale
 
 
 def test_a_carry_that_fits_as_well_as_no_motion_costs_the_log_of_its_spread():

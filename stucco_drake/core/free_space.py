@@ -162,6 +162,8 @@ class FreeSpace:
         free_actions: (k,) whether each action sensed no contact: its straight path from the
             previous action's end is swept (see :mod:`~stucco_drake.core.free_space`); None:
             only the configs at the actions' ends count.
+        slices: the :class:`SweptSlice` rasters built from it so far, by (height, sweep
+            spacing, resolution): each is built once however many searches ask for it.
     """
 
     penetration: RobotPenetration
@@ -169,6 +171,7 @@ class FreeSpace:
     rotation: np.ndarray | None
     point_steps: np.ndarray
     free_actions: np.ndarray | None = None
+    slices: dict = dataclasses.field(default_factory=dict, compare=False, repr=False)
 
 
 def swept_slice(free: FreeSpace | None, height: float,
@@ -177,11 +180,15 @@ def swept_slice(free: FreeSpace | None, height: float,
     without any config."""
     if free is None or len(free.positions) == 0:
         return None
-    flags = (np.zeros(len(free.positions), dtype=bool) if free.free_actions is None
-             else free.free_actions)  # fmt: skip
-    configs, actions = swept_configs(free.positions, flags, params.sweep_spacing)
-    return SweptSlice.build(free.penetration, configs, actions, len(free.positions),
-                            free.rotation, height, params.raster_resolution)  # fmt: skip
+    key = (float(height), params.sweep_spacing, params.raster_resolution)
+    if key not in free.slices:
+        flags = (np.zeros(len(free.positions), dtype=bool) if free.free_actions is None
+                 else free.free_actions)  # fmt: skip
+        configs, actions = swept_configs(free.positions, flags, params.sweep_spacing)
+        free.slices[key] = SweptSlice.build(free.penetration, configs, actions,
+                                            len(free.positions), free.rotation, height,
+                                            params.raster_resolution)  # fmt: skip
+    return free.slices[key]
 
 
 def free_space_costs(poses, explained, swept: SweptSlice | None, point_steps, fill,

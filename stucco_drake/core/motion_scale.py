@@ -83,11 +83,15 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
     found = []
     motion = tracked - sensed
     travelled = np.hypot(*motion[:, :2].T)
+    # Free space is judged where the points were sensed: the objects slide on the table, and
+    # the vertical part of a tracked motion is the contact-motion model's, not the object's.
+    # One slice then serves every scale (the free space caches it).
+    height = float(sensed[:, 2].mean())
     for scale in scales:
         result = search_hypotheses(rng, sensed + scale * motion, labels, shape,
                                    spread=params.transport_noise * scale * travelled,
                                    free_space=free_space, params=params,
-                                   carried=scale * motion)  # fmt: skip
+                                   carried=scale * motion, height=height)  # fmt: skip
         if result is not None:
             found.append((*result, np.full(len(result[0]), scale)))
     if not found:

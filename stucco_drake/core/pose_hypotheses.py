@@ -266,12 +266,14 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
 
 def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
                       *, spread=None, free_space: FreeSpace | None = None,
-                      params: HypothesisParams | None = None, carried=None):  # fmt: skip
+                      params: HypothesisParams | None = None, carried=None,
+                      height: float | None = None):  # fmt: skip
     """The poses :func:`pose_hypotheses` weighs, with their costs and the points each explains
     ((k, 3), (k,), (k, n)), before any is left out; None when no placement can touch
     ``min_explained`` points. Arguments and errors as :func:`pose_hypotheses`'s; ``carried``
     (n, 3): how far each point was moved from where it was sensed (None: not at all), which
-    the gripper that met it is moved by too when its contact location is scored."""
+    the gripper that met it is moved by too when its contact location is scored; ``height``:
+    of the horizontal slice (m, W) on which free space is judged (None: the points' mean)."""
     params = params or HypothesisParams()
     points = as_finite_array(points, "points", (None, 3))
     labels = np.asarray(labels)
@@ -288,7 +290,7 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
     # Hypotheses are compared on a coarser outline, and count as one within its spacing.
     coarse = sample_outline(shape, params.fill_spacing)
     fill = sample_cross_section(shape, params.fill_spacing)
-    height = float(points[:, 2].mean())
+    height = float(points[:, 2].mean()) if height is None else float(height)
     swept = swept_slice(free_space, height, params)
     steps = None if free_space is None else np.asarray(free_space.point_steps)
 
