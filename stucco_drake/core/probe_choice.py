@@ -67,7 +67,7 @@ def footprint_meets(positions, outline, half_planes, poses, shape) -> np.ndarray
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 2)
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     distance = cross_section_sdf(shape)
-    # The footprint's boundary in each target frame: (P, S, m, 2).
+    # The footprint's boundary at each position (S, m, 2), in each target frame (P, S m, 2).
     posed = positions[:, None, :] + outline[None, :, :]
     local = to_pose_frames(poses, posed.reshape(-1, 2))
     inside = distance(local).reshape(len(poses), *posed.shape[:2]) < 0.0
