@@ -37,10 +37,11 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-# Speed, printed (docs/performance.md): the tracker alone, then a whole BOR episode beside the
-# scene alone (several minutes).
+# Speed, printed (docs/performance.md): the tracker alone, the target-pose hypotheses on logged
+# episodes, then a whole BOR episode beside the scene alone (several minutes).
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_soft_tracker.py
+	$(BIN)/python benchmarks/bench_pose_hypotheses.py
 	$(BIN)/python benchmarks/bench_bor.py
 
 clean:
