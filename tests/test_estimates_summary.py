@@ -1,24 +1,5 @@
-"""The calibration lines of ``stucco-drake estimates``: counted by hand on four rows."""
-
-from stucco_drake.cli.estimates import _calibration
-from stucco_drake.eval.sets import CONFIDENT_FROM
-
-
-def test_confident_runs_and_touches_are_counted_per_base_and_in_all():
-    rows = [
-        {"base": "FB", "confidence": CONFIDENT_FROM, "grasp_success": True, "target_contacts": 3},
-        {"base": "FB", "confidence": 0.9999, "grasp_success": False, "target_contacts": 5},
-        {"base": "IB", "confidence": 0.5, "grasp_success": True, "target_contacts": 2},
-        {"base": "IB", "confidence": 0.0, "grasp_success": None, "target_contacts": 0},
-    ]
-    lines = {line.split()[0]: [int(v) for v in line.split()[1:]]
-             for line in _calibration(rows).splitlines()[1:]}
-    # confident runs, of them grasped; other runs, of them with the target touched, grasped
-    assert lines == {"FB": [2, 1, 0, 0, 0], "IB": [0, 0, 2, 1, 1], "all": [2, 1, 2, 1, 1]}
-    # From 0.5 the IB run at 0.5 is confident too (and grasped); the one at 0 is not.
-    lower = {line.split()[0]: [int(v) for v in line.split()[1:]]
-             for line in _calibration(rows, 0.5).splitlines()[1:]}
-    assert lower == {"FB": [2, 1, 0, 0, 0], "IB": [1, 1, 1, 0, 0], "all": [3, 2, 1, 0, 0]}
+"""``stucco-drake estimates``: the rows of one and of two processes, and the settings a table
+folder recorded."""
 
 
 def test_logs_scored_in_parallel_give_the_rows_of_one_process_in_log_order(tmp_path):

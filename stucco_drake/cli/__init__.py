@@ -2,7 +2,8 @@
 
 # The top of the package: ``main`` gathers every command. The layers' own commands live with
 # their layer (``bor/cli.py``: run, diagram; ``scenes/cli_sim.py``: sim; ``eval/cli_table.py``:
-# table); those that combine layers live here (``scenes``, ``estimates``, ``sweep``).
+# table; ``eval/cli_summary.py``: summary); those that combine layers live here (``scenes``,
+# ``estimates``, ``sweep``).
 # ``python -m stucco_drake.cli`` runs ``main`` (``__main__.py``).
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from stucco_drake.cli.estimates import add_estimates_command
 from stucco_drake.cli.scenes import add_scenes_command
 from stucco_drake.cli.sweep import add_sweep_command
 from stucco_drake.core.inputs import InputError, non_negative_int
+from stucco_drake.eval.cli_summary import add_summary_command
 from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES
 from stucco_drake.scenes.cli_sim import add_sim_command
@@ -88,6 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_run_command(commands)
     add_diagram_command(commands)
     add_sweep_command(commands)
+    add_summary_command(commands)
     return parser
 
 

@@ -129,29 +129,13 @@ def _summary(rows: list[dict], confident_from: float | None = None) -> str:
             if column in group[0]:
                 parts.append(f"{sum(row[column] for row in group)}/{len(group)}")
         lines.append("   ".join(parts))
-    return "\n".join([*lines, "", _calibration(rows, confident_from)])
-
-
-def _calibration(rows: list[dict], confident_from: float | None = None) -> str:
-    """Per base scene and in all: how many runs were confident (confidence at least
-    ``confident_from``, None: :data:`~stucco_drake.eval.sets.CONFIDENT_FROM`) and how many of
-    them grasped; of the others, in how many the target was touched at all and how many
-    grasped anyway."""
     from stucco_drake.eval.sets import CONFIDENT_FROM
+    from stucco_drake.eval.summary import calibration_lines
 
     threshold = CONFIDENT_FROM if confident_from is None else confident_from
-    lines = [f"confident (>= {threshold}): runs, grasped   "
-             "others: runs, target touched, grasped"]
-    for base in [*sorted({row["base"] for row in rows}), "all"]:
-        group = [row for row in rows if base in ("all", row["base"])]
-        sure = [row for row in group if row["confidence"] >= threshold]
-        rest = [row for row in group if row["confidence"] < threshold]
-        grasped = sum(bool(row["grasp_success"]) for row in sure)
-        touched = sum(int(row["target_contacts"]) > 0 for row in rest)
-        anyway = sum(bool(row["grasp_success"]) for row in rest)
-        lines.append(f"{base:<4} {len(sure):>3} {grasped:>3}   {len(rest):>3} {touched:>3} "
-                     f"{anyway:>3}")
-    return "\n".join(lines)
+    by_family = [{**row, "family": row["base"]} for row in rows]
+    families = sorted({row["base"] for row in rows})
+    return "\n".join([*lines, "", *calibration_lines(by_family, families, threshold)])
 
 
 def _action_counts(given, paths) -> tuple[int, ...]:
@@ -249,11 +233,12 @@ def score_log(path: Path, method: str, params, dx_model: str, stream: int, scale
     from stucco_drake.core.hypothesis_params import HypothesisParams
     from stucco_drake.eval.episode_log import EpisodeLog
     from stucco_drake.eval.replay import replay
+    from stucco_drake.eval.summary import layout_family
     from stucco_drake.eval.target_estimates import score_estimates
 
     log = EpisodeLog.load(path)
     penetration = bor_log.log_penetration(log)
-    base = log.scene.split("-L")[0]
+    base = layout_family(log.scene)
     cuts = [k for k in after if k <= log.n_actions] if after else [None]
     scored = []
 
