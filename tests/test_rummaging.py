@@ -443,3 +443,41 @@ def test_shove_first_pushes_an_unsure_lane_through_from_the_touch_then_probes():
         assert positions[shove] == pytest.approx([0.161, 0.10], abs=2e-3)
         first_touch = touches.index(True)
         assert min(p[0] for p in positions[first_touch:shove]) > 0.0
+
+
+class Late(Unsure):
+    """:class:`Unsure`, but asked at the first touch itself it has no pose yet: that touch's
+    contacts reach the tracker an action late, as in the loop."""
+
+    def __init__(self, pose):
+        super().__init__(pose)
+        self.asked = 0
+
+    def __call__(self):
+        self.asked += 1
+        return None if self.asked == 1 else self
+
+
+def test_probe_once_placed_asks_again_after_the_back_off_and_probes_from_the_first_touch():
+    """The box of the test above, the belief placing it only from its second asking (the
+    first is at the first touch). By default the policy touches beside once more, and the
+    belief asked at that second touch starts the probes; with ``probe_once_placed`` it asks
+    again after backing off from the first touch and probes from there, one touch sooner."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    for once_placed in (False, True):
+        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                       RummageParams(coverage=BAND_NEAREST, max_actions=80,
+                                                     retouch_back=0.0,
+                                                     probe_once_placed=once_placed))
+        belief, xy, in_contact, kinds, touches = Late(pose), START.copy(), False, [], []
+        for _ in range(80):
+            step = policy.next_step(xy, in_contact, belief)
+            if step is None:
+                break
+            kinds.append(policy._kind)
+            xy, in_contact = guarded_move(xy, step, pose)
+            touches.append(in_contact and kinds[-1] == "push")
+        probe = kinds.index("probe")
+        assert sum(touches[:probe]) == (1 if once_placed else 2)
+        if once_placed:  # straight after the back-off from the touch
+            assert kinds[probe - 1] == "back_off" and kinds[probe - 2] == "push"

@@ -56,6 +56,12 @@ class RummageParams:
             points place a can at 0.99 or more, so it is probed; a box is placed lower and
             shoved at, and the 10 kg box there stays put while what stands beside it is
             shoved along (a light box would be shoved away).
+        probe_once_placed: before each touch beside, once the touch before has been backed
+            off from and its contacts are known, ask the belief again and probe at once if it
+            places the felt object, instead of touching beside first (the decision at the
+            touch itself is made before its contacts reach the tracker). With hypotheses from
+            one point on (``HypothesisParams.min_explained`` 1) the first touch is followed by
+            the probes chosen where the hypotheses disagree.
         check_each_probe: ask the belief after each probe of a round that touched the
             target (any probe without ``verified_stop``), not only once the round is over,
             and stop there once it passes ``stop_confidence``.
@@ -79,4 +85,5 @@ class RummageParams:
     transit_back: float = 0.04
     push_through_below: float = 0.5
     shove_first: bool = False
+    probe_once_placed: bool = False
     check_each_probe: bool = False

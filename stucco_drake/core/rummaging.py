@@ -255,6 +255,12 @@ class BeliefRummagingPolicy:
         self._kind = "back_off"
         return back
 
+    def _placed_now(self, belief) -> bool:
+        """Whether, asked again once the last touch's contacts are known (they come an action
+        late), the belief places the felt object and a probe round may start."""
+        self._believe(belief)
+        return self._may_probe()
+
     def _retouch(self, xy, far_touch) -> list[tuple[str, np.ndarray]]:
         """The waypoints of the next touch beside the first (at y ``far_touch[1]``, pushed to
         x ``far_touch[0]``): back to the lanes' x, sideways, the push, and back."""
@@ -348,6 +354,10 @@ class BeliefRummagingPolicy:
                 continue
             kind, point = self._queue[0]
             if kind == "retouch":
+                if self.params.probe_once_placed and self._placed_now(belief):
+                    self._queue.pop(0)
+                    self._probe = self._new_probe()
+                    return self._decide(xy, False, belief)
                 self._queue[:1] = self._retouch(xy, point)
                 continue
             if kind == "assess":

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from stucco_drake.core.inputs import prepare_output_file, probability
+from stucco_drake.core.inputs import InputError, prepare_output_file, probability
 from stucco_drake.eval.sets import CONFIDENT_FROM
 from stucco_drake.eval.summary import (
     against_lines,
@@ -45,8 +45,6 @@ def summary_text(tables, reference: str = "stucco", against=None,
                  confident_from: float = CONFIDENT_FROM) -> str:
     """The summary of the folders ``tables`` (see :mod:`stucco_drake.eval.summary`) as
     Markdown; InputError (one line) on folders that cannot be pooled."""
-    from stucco_drake.core.inputs import InputError
-
     rows = load_runs(tables)
     other_rows = load_runs(against) if against else None
     families = list(dict.fromkeys(row["family"] for row in rows))
