@@ -95,7 +95,9 @@ def _table(folder, grasps: dict, config: dict, estimates: dict | None = None):
 
 
 def test_two_folders_are_pooled_by_family_and_paired_layout_by_layout(tmp_path, capsys):
-    config = {"dx_model": "cone", "policy": "probe"}
+    """Two folders of one setting (one recorded before the hypothesis settings were), and
+    the paper's layout against them: counts, intervals and tests worked by hand."""
+    config = {"dx_model": "cone", "stucco_params": {}, "policy": "probe"}
     # FB: STUCCO grasps L1, L2, L3 and not L4; BIRCH only L4. IB: both grasp L1.
     first = _table(tmp_path / "a", {("FB-L1", "stucco"): True, ("FB-L1", "birch"): False,
                                     ("FB-L2", "stucco"): True, ("FB-L2", "birch"): False,
@@ -104,7 +106,8 @@ def test_two_folders_are_pooled_by_family_and_paired_layout_by_layout(tmp_path, 
                             "IB-L1": (0.5, True, 3)})
     second = _table(tmp_path / "b", {("FB-L3", "stucco"): True, ("FB-L3", "birch"): False,
                                      ("FB-L4", "stucco"): False, ("FB-L4", "birch"): True},
-                    config, {"FB-L3": (0.9995, False, 2), "FB-L4": (0.1, False, 1)})
+                    {**config, "hypothesis_params": {}},  # recorded once the key existed
+                    {"FB-L3": (0.9995, False, 2), "FB-L4": (0.1, False, 1)})
     paper = _table(tmp_path / "p", {("FB", "stucco"): True}, config)
     out = tmp_path / "summary.md"
     assert main(["summary", "--tables", first, second, "--against", paper,
@@ -128,14 +131,15 @@ def test_two_folders_are_pooled_by_family_and_paired_layout_by_layout(tmp_path, 
     ("no such method", "--reference gmphd: no run of it"),
 ])  # fmt: skip
 def test_folders_that_cannot_be_pooled_are_one_error_line(tmp_path, capsys, case, fragment):
-    config = {"dx_model": "cone"}
+    config = {"dx_model": "cone", "stucco_params": {}}
     first = _table(tmp_path / "a", {("FB-L1", "stucco"): True}, config)
     argv = ["summary", "--tables", first]
     if case == "no runs":
         (tmp_path / "empty").mkdir()
         argv.append(str(tmp_path / "empty"))
     elif case == "other settings":
-        argv.append(_table(tmp_path / "b", {("FB-L2", "stucco"): True}, {"dx_model": "ee"}))
+        argv.append(_table(tmp_path / "b", {("FB-L2", "stucco"): True},
+                           {**config, "dx_model": "ee"}))
     elif case == "a run twice":
         argv.append(_table(tmp_path / "b", {("FB-L1", "stucco"): False}, config))
     else:

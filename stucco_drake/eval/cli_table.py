@@ -145,6 +145,24 @@ def simulate_missing(episodes, out: Path, executor: cf.Executor, progress,
 TABLE_CONFIG = "table_config.yaml"
 
 
+def _plain(mapping):
+    """``mapping`` as YAML reads it back: lists, plain floats."""
+    return yaml.safe_load(yaml.safe_dump(mapping))
+
+
+def complete_config(recorded: Mapping) -> dict:
+    """A table config as read (a mapping with at least ``dx_model`` and ``stucco_params``),
+    each setting it lacks, written before that setting existed, at its default then, and
+    STUCCO's parameters completed with Table I's: configs of the same settings compare equal."""
+    return {**recorded, "filter_stream": recorded.get("filter_stream", 0),
+            "target_estimator": recorded.get("target_estimator", "rules"),
+            "policy": recorded.get("policy", "prescribed"),
+            "policy_params": recorded.get("policy_params") or {},
+            "hypothesis_params": recorded.get("hypothesis_params") or {},
+            "stucco_params": {**_plain(SoftTrackingParams.sim().to_mapping()),
+                              **recorded["stucco_params"]}}  # fmt: skip
+
+
 def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingParams | None,
                        filter_stream: int = 0, target_estimator: str = "rules",
                        policy: str = "prescribed", policy_params: Mapping | None = None,
@@ -158,11 +176,8 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
     scene, seed and method only, so rows of two settings in one folder would pass for each
     other. A file written before a setting existed counts at that setting's default.
     ValueError naming the first setting that differs."""
-    def plain(mapping):  # as YAML reads it back: lists, plain floats
-        return yaml.safe_load(yaml.safe_dump(mapping))
-
     params = stucco_params if stucco_params is not None else SoftTrackingParams.sim()
-    config = plain({"dx_model": dx_model, "stucco_params": params.to_mapping(),
+    config = _plain({"dx_model": dx_model, "stucco_params": params.to_mapping(),
                     "filter_stream": int(filter_stream),
                     "target_estimator": target_estimator, "policy": policy,
                     "policy_params": dict(policy_params or {}),
@@ -183,18 +198,14 @@ def check_table_config(out: Path, dx_model: str, stucco_params: SoftTrackingPara
         raise ValueError(f"{path} is not a table config (expected keys dx_model, stucco_params"
                          f" and optionally filter_stream, target_estimator, policy, "
                          f"policy_params, hypothesis_params)")
-    # What a file written before a setting existed lacks counts at that setting's default.
-    old_params = {**plain(SoftTrackingParams.sim().to_mapping()), **recorded["stucco_params"]}
-    settings = [("--dx-model ", recorded["dx_model"], dx_model),
-                ("--filter-stream ", recorded.get("filter_stream", 0), config["filter_stream"]),
-                ("--target-estimator ", recorded.get("target_estimator", "rules"),
-                 target_estimator),
-                ("--policy ", recorded.get("policy", "prescribed"), policy),
-                ("--policy-params ", recorded.get("policy_params") or {},
-                 config["policy_params"]),
-                ("--hypothesis-params ", recorded.get("hypothesis_params") or {},
-                 config["hypothesis_params"])]
-    settings += [(f"STUCCO's {name} = ", repr(old_params[name]), repr(value))
+    old = complete_config(recorded)
+    settings = [("--dx-model ", old["dx_model"], dx_model),
+                ("--filter-stream ", old["filter_stream"], config["filter_stream"]),
+                ("--target-estimator ", old["target_estimator"], target_estimator),
+                ("--policy ", old["policy"], policy),
+                ("--policy-params ", old["policy_params"], config["policy_params"]),
+                ("--hypothesis-params ", old["hypothesis_params"], config["hypothesis_params"])]
+    settings += [(f"STUCCO's {name} = ", repr(old["stucco_params"][name]), repr(value))
                  for name, value in config["stucco_params"].items()]  # fmt: skip
     for label, old, new in settings:
         if old != new:

@@ -64,15 +64,16 @@ def fisher_p(successes_a: int, runs_a: int, successes_b: int, runs_b: int) -> fl
 
 
 def _config(folder: Path) -> dict:
-    from stucco_drake.eval.cli_table import TABLE_CONFIG
+    """The settings ``folder``'s rows were made with (:func:`complete_config`)."""
+    from stucco_drake.eval.cli_table import TABLE_CONFIG, complete_config
 
     try:
         config = yaml.safe_load((folder / TABLE_CONFIG).read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as error:
         raise InputError(f"{folder}: no readable {TABLE_CONFIG} ({error})") from None
-    if not isinstance(config, dict):
+    if not isinstance(config, dict) or not {"dx_model", "stucco_params"} <= set(config):
         raise InputError(f"{folder / TABLE_CONFIG}: not a table config")
-    return config
+    return complete_config(config)
 
 
 def load_runs(folders: Sequence[str | Path]) -> list[dict]:
