@@ -208,3 +208,30 @@ def test_a_probe_whose_outcome_was_felt_already_is_not_chosen():
     assert np.linalg.norm(probe.point - plain.point) > 0.01
     met = np.isfinite(outcomes) & (outcomes != BUMP)
     assert met.sum() == 1 or abs(outcomes[0] - outcomes[1]) >= 0.015, outcomes
+
+
+def test_by_gain_per_action_a_near_touch_that_splits_fewer_poses_wins_over_a_far_one():
+    """Three equally likely poses: the end-on box, the same box turned (the two of the tests
+    above) and the end-on box 5 cm along +y. From (0, 0.05) the probe of most gain travels 10
+    steps of 2 cm to touch the end-on boxes' -y sides and the turned box's long face from
+    below: three different outcomes, ln 3 nats. Counting what each probe costs, the touch
+    one step away in front, beside the first end-on box, wins: it meets the turned and the
+    shifted box at the same distance and passes the first, ln 3 - (2/3) ln 2 = 0.64 nats
+    for 1 travel step."""
+    from stucco_drake.core.coverage import waypoint_steps
+
+    poses = np.array([[0.2, 0.0, np.pi / 2], [0.151, 0.0, 0.0], [0.2, 0.05, np.pi / 2]])
+    hypotheses = Hypotheses(poses, np.zeros(3), poses[0])
+    start = np.array([0.0, 0.05])
+    chosen = {}
+    for per_action in (False, True):
+        params = ProbeParams(face_step=0.02, direct_only=False, gain_per_action=per_action)
+        policy = FaceProbePolicy(BOX, FOOTPRINT, max_step=0.03, params=params)
+        assert policy.next_step(start, False, hypotheses) is not None
+        steps = len(waypoint_steps(start, policy._waypoints, params.travel_step))
+        chosen[per_action] = steps, planned_outcomes(policy, poses)
+    steps, outcomes = chosen[False]
+    assert steps == 10 and len(np.unique(np.round(outcomes, 3))) == 3, chosen
+    steps, outcomes = chosen[True]
+    assert steps == 1 and np.isinf(outcomes[0]), chosen
+    assert outcomes[1] == pytest.approx(outcomes[2], abs=1e-9)

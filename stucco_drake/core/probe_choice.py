@@ -26,6 +26,7 @@ import itertools
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from stucco_drake.core.coverage import waypoint_steps
 from stucco_drake.core.hypothesis_weights import cost_weights
 from stucco_drake.core.icp import (
     cross_section_sdf,
@@ -175,10 +176,12 @@ def face_probe_points(centre, half, yaw: float, footprint, step: float,
 
 def most_informative(candidates, poses, costs, shape, footprint, *,
                      temperature: float, tolerance: float, overshoot: float,
-                     start, felt=None) -> tuple[float, object, list] | None:  # fmt: skip
+                     start, felt=None, steps=None,
+                     least_gain: float = 0.0) -> tuple[float, object, list] | None:  # fmt: skip
     """The candidate probe of most expected information gain about the hypotheses (``poses``
     (P, 3) W with ``costs`` (P,), tempered by ``temperature``) and its travel, as (gain,
-    probe, waypoints); None without candidates.
+    probe, waypoints); None without candidates. With ``steps``, the probe of most gain per
+    action it takes.
 
     Args:
         candidates: (probe, approach start (2,), travel waypoints ending there) of each probe
@@ -190,6 +193,10 @@ def most_informative(candidates, poses, costs, shape, footprint, *,
         start: (2,) where the gripper is (W).
         felt: (o, 2) points where something was felt (W; None: none), met by the gripper
             under every hypothesis (:func:`probe_outcomes`).
+        steps: (travel, approach) longest step per action (m): the probe's actions are its
+            travel's legs cut at the travel step per axis (as the gripper plays them) and
+            its approach cut at the approach step, plus the retreat. None: the gain alone.
+        least_gain: a probe gaining less (nats) is not chosen (None when none gains as much).
     """
     outline, half_planes = footprint_outline(footprint)
     weights = cost_weights(costs, temperature)
@@ -204,9 +211,15 @@ def most_informative(candidates, poses, costs, shape, footprint, *,
         outcomes = probe_outcomes(path, far, probe.normal, travel, poses, shape, outline,
                                   half_planes, felt=felt)  # fmt: skip
         gain = outcome_entropy(outcomes, weights, tolerance)
-        if best is None or gain > best[0] + 1e-9:
-            best = (gain, probe, waypoints)
-    return best
+        if gain < least_gain:
+            continue
+        score = gain
+        if steps is not None:
+            actions = len(waypoint_steps(start, waypoints, steps[0]))
+            score = gain / (actions + np.ceil(travel / steps[1] - 1e-9) + 1)
+        if best is None or score > best[3] + 1e-9:
+            best = (gain, probe, waypoints, score)
+    return None if best is None else best[:3]
 
 
 __all__ = ["BUMP", "face_probe_points", "felt_meets", "footprint_meets", "footprint_outline",

@@ -63,6 +63,10 @@ class ProbeParams:
             a probe through it, whose outcome is known already, gains nothing. Off (the
             default): only the posed target is met, as every folder before the development
             layouts' thirty-second look.
+        gain_per_action: with ``discriminate``, choose the probe of most gain per action it
+            takes (its travel, approach and retreat) rather than of most gain: under a budget
+            of actions a near touch that tells fewer hypotheses apart may be worth more than
+            a far one. The gain itself must still reach ``min_gain``.
     """
 
     standoff: float = 0.02
@@ -87,6 +91,7 @@ class ProbeParams:
     extent_margin: bool = False
     face_step: float | None = None
     felt_obstacles: bool = False
+    gain_per_action: bool = False
 
     def __post_init__(self):
         if self.face_step is not None and not self.face_step > 0:

@@ -280,8 +280,10 @@ class FaceProbePolicy:
         best = most_informative(candidates, poses, np.asarray(hypotheses.costs)[rivals],
                                 self.shape, self.footprint, temperature=p.rival_temperature,
                                 tolerance=p.outcome_tolerance, overshoot=p.overshoot,
-                                start=xy, felt=felt)  # fmt: skip
-        if best is None or best[0] < p.min_gain:
+                                start=xy, felt=felt, least_gain=p.min_gain,
+                                steps=((p.travel_step, p.approach_step) if p.gain_per_action
+                                       else None))  # fmt: skip
+        if best is None:
             return False
         self._probe, self._waypoints, self._phase = best[1], best[2], "travel"
         self._informative = True
