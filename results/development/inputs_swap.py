@@ -7,7 +7,10 @@ For each layout it replays STUCCO and k-means at the table's settings, then prin
 - how far the target's tracked points lie from where the points truly are at the end (each
   sensed point carried with the target's true motion since it was sensed), for both methods
   and for the points where sensed;
-- STUCCO's estimate searched at some of the motion scales only.
+- STUCCO's estimate searched at some of the motion scales only;
+- STUCCO's particles at the end (how far apart they put the target's points), and the actions
+  at which the MAP particle's earlier target points moved most, against the target's true
+  motion in that action and what the action touched (object indices, -1: unknown).
 
 Run from the repository's root:  .venv/bin/python results/development/inputs_swap.py
 """
@@ -19,9 +22,11 @@ import numpy as np
 
 from stucco_drake.bor import log as bor_log
 from stucco_drake.cli.estimates import _table_settings
+from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.hypothesis_params import HypothesisParams
+from stucco_drake.core.pose_hypotheses import tracker_spread
 from stucco_drake.eval.episode_log import EpisodeLog
-from stucco_drake.eval.replay import replay
+from stucco_drake.eval.replay import observed_dx, replay
 from stucco_drake.eval.target_estimates import hypotheses_estimate, log_target_shape, point_steps
 
 HERE = Path(__file__).parent
@@ -67,6 +72,34 @@ def estimate(log, points, labels, hypothesis_params, scales=None) -> str:
     return f"{np.hypot(*(found.pose[:2] - truth)) * 100:4.1f} cm ({found.confidence:.2f})"
 
 
+def stucco_moves(log, folder: Path, shown: int = 4) -> None:
+    """Replays STUCCO as :func:`tracked` does, printing its particles' spread on the target's
+    points at the end and the ``shown`` actions that moved the MAP particle's earlier target
+    points most."""
+    dx_model, params, stream, _ = _table_settings(folder)
+    penetration = bor_log.log_penetration(log)
+    dx_all = observed_dx(log, dx_model, penetration)
+    tracker = make_tracker("stucco", params, penetration)
+    rng = np.random.default_rng(log.seed + 1000 * stream)
+    target = np.flatnonzero(log.contact_object == 0)
+    moves, before = [], None
+    for t in range(log.n_actions):
+        points, _, objects = log.contacts(t)
+        lo, hi = log.contact_offsets[t], log.contact_offsets[t + 1]
+        tracker.update(rng, log.ee_position[t], points, dx_all[lo:hi], log.ee_rotation[t])
+        now, earlier = tracker.map_points(), target[target < lo]
+        if len(earlier) and before is not None:
+            moved = np.linalg.norm(now[earlier, :2] - before[earlier, :2], axis=1).mean()
+            truly = np.linalg.norm(np.diff(log.object_poses[t:t + 2, 0, :2], axis=0))
+            moves.append((moved, t, truly, sorted(set(objects.tolist()))))
+        before = now.copy()
+    spread = tracker_spread(tracker)[target]
+    print(f"  particles' spread on the target's points: median {np.median(spread) * 100:.2f} cm")
+    for moved, t, truly, objects in sorted(moves, reverse=True)[:shown]:
+        print(f"  action {t}: target points moved {moved * 100:.2f} cm (mean), the target "
+              f"{truly * 100:.2f} cm; touched {objects}")
+
+
 def main() -> None:
     for name, scene in LAYOUTS:
         folder = HERE / name
@@ -86,6 +119,7 @@ def main() -> None:
         for scales in ((0.0,), (0.0, 0.5, 1.0), (1.0,)):
             print(f"  stucco at scales {scales}: "
                   + estimate(log, got["stucco"][0], got["stucco"][1], params, scales))
+        stucco_moves(log, folder)
 
 
 if __name__ == "__main__":
