@@ -12,9 +12,14 @@ For each layout it replays STUCCO and k-means at the table's settings, then prin
   at which the MAP particle's earlier target points moved most, against the target's true
   motion in that action and what the action touched (object indices, -1: unknown).
 
-Run from the repository's root:  .venv/bin/python results/development/inputs_swap.py
+With ``--all``, instead, over every log of the three folders: per family, the median over
+layouts of how far the target's points lie from their true place (median over the points),
+where sensed, as STUCCO tracks them and as k-means does.
+
+Run from the repository's root:  .venv/bin/python results/development/inputs_swap.py [--all]
 """
 
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -27,6 +32,7 @@ from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.pose_hypotheses import tracker_spread
 from stucco_drake.eval.episode_log import EpisodeLog
 from stucco_drake.eval.replay import observed_dx, replay
+from stucco_drake.eval.summary import layout_family
 from stucco_drake.eval.target_estimates import hypotheses_estimate, log_target_shape, point_steps
 
 HERE = Path(__file__).parent
@@ -100,6 +106,30 @@ def stucco_moves(log, folder: Path, shown: int = 4) -> None:
               f"{truly * 100:.2f} cm; touched {objects}")
 
 
+def all_layouts() -> None:
+    """Per family: the target points' distance from their true place, three ways."""
+    gaps = {}
+    for name in ("probe_disc_fb", "probe_disc_fb_more", "probe_disc"):
+        folder = HERE / name
+        for path in sorted((folder / "logs").glob("*.npz")):
+            log = EpisodeLog.load(path)
+            on_target = log.contact_object == 0
+            if not on_target.any():
+                continue
+            truth = carried(log)[on_target]
+            row = [float(np.median(np.linalg.norm(points[on_target, :2] - truth, axis=1)))
+                   for points in (log.contact_points, tracked(log, folder, "stucco")[0],
+                                  tracked(log, folder, "kmeans")[0])]  # fmt: skip
+            gaps.setdefault(layout_family(log.scene), []).append(row)
+    for family, rows in gaps.items():
+        rows = np.array(rows) * 100
+        sensed, stucco, kmeans = np.median(rows, axis=0)
+        print(f"{family} ({len(rows)} layouts): sensed {sensed:.2f} cm, STUCCO {stucco:.2f}, "
+              f"k-means {kmeans:.2f}; STUCCO nearer than sensed in "
+              f"{int(np.sum(rows[:, 1] < rows[:, 0]))}, k-means in "
+              f"{int(np.sum(rows[:, 2] < rows[:, 0]))}")
+
+
 def main() -> None:
     for name, scene in LAYOUTS:
         folder = HERE / name
@@ -123,4 +153,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    all_layouts() if sys.argv[1:] == ["--all"] else main()
