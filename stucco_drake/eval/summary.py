@@ -123,7 +123,8 @@ def load_estimates(folders: Sequence[str | Path], method: str) -> list[dict] | N
 
 
 def _grasps(rows, family, method) -> dict[tuple[str, int], bool]:
-    """(scene, seed) -> grasped, over the runs of ``method`` in ``family`` that grasped."""
+    """(scene, seed) -> grasped, over the runs of ``method`` in ``family`` whose grasp was
+    made (a run with no grasp outcome is left out)."""
     return {(r["scene"], r["seed"]): bool(r["grasp_success"]) for r in rows
             if r["family"] == family and r["method"] == method
             and r["grasp_success"] is not None}  # fmt: skip
@@ -163,8 +164,8 @@ def grasp_lines(rows, families, methods) -> list[str]:
 
 
 def paired_lines(rows, families, reference, methods) -> list[str]:
-    """Each other method against ``reference`` on the layouts both grasped on: W/L (layouts
-    only the reference grasps / only the other), McNemar's exact two-sided p."""
+    """Each other method against ``reference`` on the runs both have a grasp outcome for:
+    W/L (layouts only the reference grasps / only the other), McNemar's exact two-sided p."""
     table = []
     for method in methods:
         if method == reference:
