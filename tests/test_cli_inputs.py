@@ -127,6 +127,12 @@ BAD_INPUTS = {
     "estimates hypothesis params unknown key": (
         "estimates --table {tmp}/a_folder --hypothesis-params {tmp}/typo.yaml",
         "--hypothesis-params {tmp}/typo.yaml: lenght: not a setting of HypothesisParams"),
+    "estimates stucco params unknown key": (
+        "estimates --table {tmp}/a_folder --stucco-params {tmp}/typo.yaml",
+        "--stucco-params {tmp}/typo.yaml: lenght: not a setting of SoftTrackingParams"),
+    "estimates stucco params, a baseline": (
+        "estimates --table {tmp}/a_folder --method kmeans --stucco-params {tmp}/typo.yaml",
+        "--stucco-params: only with --method stucco, not kmeans"),
     "estimates threshold > 1": ("estimates --table {tmp}/a_folder --confident-from 1.2",
                                 "argument --confident-from: must be in [0, 1], got 1.2"),
     "estimates cut at 0 actions": ("estimates --table {tmp}/a_folder --after-actions 12 0",

@@ -75,6 +75,27 @@ def test_replace_bad_moves_a_penetrating_point_to_its_nearest_consistent_neighbo
     np.testing.assert_array_equal(after[:, [0, 2]], before[:, [0, 2]])
 
 
+def test_replace_bad_off_leaves_the_penetrating_point_and_only_weighs_it(disc_penetration):
+    params = SoftTrackingParams(n_particles=2, resample_ess_fraction=0.01, replace_bad=False)
+    tracker = SoftTracker(disc_penetration, params)
+    rng = np.random.default_rng(0)
+    for y in (0.0, 0.05):
+        tracker.update(rng, [-0.05, y, 0.0], [[-0.03, y, 0.0]], [[0.0, 0.0, 0.0]])
+    tracker._points[0, 1, 1] += 0.04  # particle 1 believes the second point moved 4 cm along +x
+    before = tracker.points
+    # The disc (radius 2 cm) now covers x in [-0.01, 0.03] at y = 0.05: particle 1's second
+    # point (x = 0.01) lies 2 cm inside it, particle 0's (x = -0.03) on its surface.
+    tracker.update(rng, [0.01, 0.05, 0.0])
+    np.testing.assert_array_equal(tracker.points, before)  # nothing copied
+    weights = np.exp(tracker.log_weights)
+    np.testing.assert_allclose(weights[1] / weights[0], np.exp(-(0.018**2) / 0.002), rtol=0.02)
+
+
+def test_replace_bad_must_be_a_bool():
+    with pytest.raises(ValueError, match="replace_bad"):
+        SoftTrackingParams(replace_bad="no")
+
+
 def test_out_of_contact_step_lowers_weight_of_particles_the_robot_passes_through(
     disc_penetration,
 ):

@@ -14,16 +14,20 @@ For each layout it replays STUCCO and k-means at the table's settings, then prin
 
 With ``--all``, instead, over every log of the three folders: per family, the median over
 layouts of how far the target's points lie from their true place (median over the points),
-where sensed, as STUCCO tracks them and as k-means does.
+where sensed, as STUCCO tracks them and as k-means does. Arguments after ``--all`` change
+STUCCO's parameters, e.g. ``replace_bad=false`` (the thirty-ninth look).
 
-Run from the repository's root:  .venv/bin/python results/development/inputs_swap.py [--all]
+Run from the repository's root:
+    .venv/bin/python results/development/inputs_swap.py [--all [NAME=VALUE ...]]
 """
 
+import dataclasses
 import sys
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+import yaml
 
 from stucco_drake.bor import log as bor_log
 from stucco_drake.cli.estimates import _table_settings
@@ -40,10 +44,11 @@ LAYOUTS = [("probe_disc_fb", "FB-L1017"), ("probe_disc_fb", "FB-L1029"),
            ("probe_disc", "IB-L1027"), ("probe_disc", "IB-L1028"), ("probe_disc", "IB-L1029")]
 
 
-def tracked(log, folder: Path, method: str):
+def tracked(log, folder: Path, method: str, changes=None):
     """(points (n, 3) m, segment labels (n,)) of ``method`` replayed on ``log`` as the table
-    did."""
+    did (STUCCO's parameters with ``changes``, a dict of SoftTrackingParams fields)."""
     dx_model, params, stream, _ = _table_settings(folder)
+    params = dataclasses.replace(params, **(changes or {}))
     kept = {}
 
     def keep(_, tracker):
@@ -106,8 +111,9 @@ def stucco_moves(log, folder: Path, shown: int = 4) -> None:
               f"{truly * 100:.2f} cm; touched {objects}")
 
 
-def all_layouts() -> None:
-    """Per family: the target points' distance from their true place, three ways."""
+def all_layouts(changes=None) -> None:
+    """Per family: the target points' distance from their true place, three ways (STUCCO's
+    parameters with ``changes``)."""
     gaps = {}
     for name in ("probe_disc_fb", "probe_disc_fb_more", "probe_disc"):
         folder = HERE / name
@@ -118,7 +124,7 @@ def all_layouts() -> None:
                 continue
             truth = carried(log)[on_target]
             row = [float(np.median(np.linalg.norm(points[on_target, :2] - truth, axis=1)))
-                   for points in (log.contact_points, tracked(log, folder, "stucco")[0],
+                   for points in (log.contact_points, tracked(log, folder, "stucco", changes)[0],
                                   tracked(log, folder, "kmeans")[0])]  # fmt: skip
             gaps.setdefault(layout_family(log.scene), []).append(row)
     for family, rows in gaps.items():
@@ -152,5 +158,13 @@ def main() -> None:
         stucco_moves(log, folder)
 
 
+def changes_of(texts) -> dict:
+    """SoftTrackingParams changes from ``name=value`` texts (value read as YAML)."""
+    return {name: yaml.safe_load(value) for name, _, value in (t.partition("=") for t in texts)}
+
+
 if __name__ == "__main__":
-    all_layouts() if sys.argv[1:] == ["--all"] else main()
+    if sys.argv[1:2] == ["--all"]:
+        all_layouts(changes_of(sys.argv[2:]))
+    else:
+        main()

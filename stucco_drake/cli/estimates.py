@@ -1,7 +1,8 @@
 """``stucco-drake estimates``: both target-pose estimators on a table's logged episodes.
 
 Replays a method on every log of a ``table`` output folder, at that folder's recorded settings
-(the target pose estimator's among them, unless ``--hypothesis-params`` overrides them), and
+(the target pose estimator's among them, unless ``--hypothesis-params`` overrides them, and
+STUCCO's tracker's, unless ``--stucco-params`` changes some), and
 scores the segment-selection rules and the weighted hypotheses against the target's final
 pose (:func:`~stucco_drake.eval.target_estimates.score_estimates`), without simulating a grasp.
 Each row joins the table's own grasp outcome for the method (made with the rules' estimate).
@@ -33,6 +34,7 @@ from stucco_drake.core.inputs import (
     hypothesis_settings_of,
     positive_int,
     probability,
+    read_settings,
 )
 
 #: Outline error (m) under which an estimate is counted as near the truth in the summary.
@@ -56,6 +58,10 @@ def add_estimates_command(subparsers) -> None:
                               "hypotheses with, e.g. confidence_temperature: 3.0, instead of "
                               "the table's recorded ones; writes "
                               "estimates_<method>_<file's stem>.csv")
+    command.add_argument("--stucco-params", default=None, metavar="SETTINGS.yaml",
+                         help="a YAML mapping of SoftTrackingParams fields to replay STUCCO "
+                              "with on top of the table's recorded ones, e.g. replace_bad: "
+                              "false; writes estimates_stucco_<file's stem>.csv")
     command.add_argument("--confident-from", type=probability, default=None, metavar="P",
                          help="the confidence from which the summary counts a run as "
                               "confident (default: the project's threshold, "
@@ -270,11 +276,21 @@ def run_estimates(args: argparse.Namespace) -> int:
     out = Path(args.table)
     scales, suffix = _motion_scales(args.motion_scales)
     hypothesis_params, _ = hypothesis_settings_of(args.hypothesis_params)
+    if args.stucco_params is not None:
+        if args.method != "stucco":
+            raise InputError(f"--stucco-params: only with --method stucco, not {args.method}")
+        from stucco_drake.core.params import SoftTrackingParams
+
+        read_settings("--stucco-params", args.stucco_params, SoftTrackingParams.sim())
     dx_model, params, stream, recorded = _table_settings(out)
+    if args.stucco_params is not None:  # on top of the table's recorded parameters
+        params = read_settings("--stucco-params", args.stucco_params, params)
     if hypothesis_params is None:  # the table's own, as its grasps were made with
         hypothesis_params = recorded
     else:
         suffix += "_" + Path(args.hypothesis_params).stem
+    if args.stucco_params is not None:
+        suffix = "_" + Path(args.stucco_params).stem + suffix
     paths = sorted((out / "logs").glob("*.npz"))
     if not paths:
         raise InputError(f"--table {out}: no episode logs in {out / 'logs'}")

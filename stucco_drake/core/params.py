@@ -39,6 +39,12 @@ class SoftTrackingParams:
             ``touched_side_margin`` is None.
         normal_probe_radius: how far (m) around a contact the robot's normal is compared to
             judge its uncertainty s: about the contact isolation's error.
+        replace_bad: True (the paper's Algorithm 2) replaces each point that penetrates one of
+            its particle's configs by the nearest consistent point of that particle after every
+            update; False leaves it where it is, so penetration only lowers the particle's
+            weight. A point pressed into the robot's rigid model by a compressed bubble, or
+            carried into it by a push the object did not follow, is otherwise copied onto
+            another point of the same face, centimetres away along it.
     """
 
     length: float = 0.02
@@ -50,6 +56,7 @@ class SoftTrackingParams:
     touched_side_margin: float | None = None
     touched_side_softness: float = 0.0
     normal_probe_radius: float = 0.003
+    replace_bad: bool = True
 
     def __post_init__(self):
         for name in ("length", "penetration_length"):
@@ -88,6 +95,10 @@ class SoftTrackingParams:
             raise ValueError(
                 "SoftTrackingParams.normal_probe_radius: must be > 0, "
                 f"got {self.normal_probe_radius!r}"
+            )
+        if not isinstance(self.replace_bad, bool):
+            raise ValueError(
+                f"SoftTrackingParams.replace_bad: must be true or false, got {self.replace_bad!r}"
             )
         if not 0.0 < self.resample_ess_fraction <= 1.0:
             raise ValueError(

@@ -45,7 +45,9 @@ class SoftTracker:
        (code's tolerance; the paper says any penetration). The bad pair (p, x) is replaced by
        the nearest good pair of the same particle; a particle with no good pair is left as is.
        In contact all configs are checked; out of contact only x_t is, which is exact because
-       the previous ReplaceBad left every other pair consistent.
+       the previous ReplaceBad left every other pair consistent. With ``replace_bad`` off
+       (not the paper) no pair is replaced: a penetrating point stays and only weighs its
+       particle down, at every later step in contact.
     6. The MAP particle is the heaviest one, ties kept with the previous MAP; after resampling it
        is the first copy of that particle, so it also receives ReplaceBad's repairs.
     7. Optionally (``touched_side_margin``, off by default) a point does not follow a contact
@@ -291,9 +293,10 @@ class SoftTracker:
         self._rotation_index = self._rotation_index[ancestors]
 
     def _replace_bad(self, bad: np.ndarray) -> None:
-        """Algorithm 2: replace each inconsistent pair by the nearest consistent one."""
+        """Algorithm 2: replace each inconsistent pair by the nearest consistent one (nothing
+        when ``params.replace_bad`` is off)."""
         particle, point = np.nonzero(bad)
-        if particle.size == 0:
+        if particle.size == 0 or not self.params.replace_bad:
             return
         n = self._n
         existing = self._points[:, :, :n]
