@@ -62,6 +62,12 @@ def test_fb_log_holds_the_episode(fb_log):
                 errors.append(d)
     assert len(errors) >= 3 and np.median(errors) < 0.03, errors
     assert fb_log.final_state.size > 2 * 7 and np.all(np.isfinite(fb_log.final_state))
+    # Each action's peak force is logged: 0 with no contact, positive with one (its value
+    # against an applied force: test_wrench_estimator).
+    touched = np.diff(fb_log.contact_offsets) > 0
+    assert fb_log.action_peak_force.shape == (N_ACTIONS,) and touched.any()
+    assert np.all(fb_log.action_peak_force[touched] > 0.0)
+    assert fb_log.first(3).action_peak_force.shape == (3,)
 
 
 def test_every_method_replays_a_drake_log(fb_log):

@@ -77,6 +77,23 @@ def test_accumulator_sums_displacement_of_contact_steps_per_action():
     np.testing.assert_array_equal(A.completed(s).dx, np.zeros(3))
 
 
+def test_accumulator_keeps_the_peak_force_of_the_contact_steps_per_action():
+    A = ActionContactAccumulator
+    s = A.initial_state()
+    # action 0: 40 N while free (not counted), then 3 N and 25 N in contact
+    for force, contact in ((40.0, False), (3.0, True), (25.0, True), (1.0, False)):
+        s = A.step(s, 0, contact, [0.0, 0.0, 0.0], force)
+    assert A.current(s).peak_force == 25.0
+    s = A.step(s, 1, False, [0.0, 0.0, 0.0], 50.0)  # closes action 0; its boundary step is free
+    assert A.completed(s).peak_force == 25.0
+    s = A.step(s, 2, False, [0.0, 0.0, 0.0], 2.0)
+    assert A.completed(s).peak_force == 0.0  # action 1 had no step in contact
+    # no force given: NaN, as an ActionContact made without one
+    s = A.initial_state()
+    s = A.step(A.step(s, 0, True, [0.0, 0.0, 0.0]), 1, False, [0.0, 0.0, 0.0])
+    assert np.isnan(A.completed(s).peak_force)
+
+
 def test_momentum_observer_is_a_first_order_filter_of_the_external_torque():
     """A 2-joint system with a configuration-dependent mass matrix, stepped like Drake's discrete
     plants (M_n (v_{n+1} - v_n) = h (τ + known + τ_ext)); the observer must give exactly

@@ -152,6 +152,7 @@ class EpisodeRecorder:
         self._poses = [planar_poses(built, self._plant_context, self.names)]
         self._distances, self._positions, self._rotations = [], [], []
         self._points, self._dx, self._objects, self._offsets = [], [], [], [0]
+        self._peak_forces = []
 
     def on_action(self, k: int, contacts) -> None:
         """Record action ``k`` (its ``ActionContacts``), with the context at its end."""
@@ -162,6 +163,7 @@ class EpisodeRecorder:
         self._rotations.append(X_WE.rotation().matrix().copy())
         self._points.append(np.asarray(contacts.points, dtype=np.float64).reshape(-1, 3))
         self._dx.append(np.asarray(contacts.dx, dtype=np.float64).reshape(-1, 3))
+        self._peak_forces.append(float(contacts.peak_force))
         self._objects.extend(self._index.get(t.name, -1) for t in truth)
         self._offsets.append(self._offsets[-1] + len(self._points[-1]))
         self._poses.append(planar_poses(built, plant_context, self.names))
@@ -190,6 +192,7 @@ class EpisodeRecorder:
             shape_object=self._owner,
             robot_object_distance=np.array(self._distances).reshape(-1, len(self.names)),
             robot_shape=np.zeros(0),
+            action_peak_force=np.array(self._peak_forces, dtype=np.float64),
             final_state=built.plant.GetPositionsAndVelocities(plant_context),
             info={
                 "producer": "drake",

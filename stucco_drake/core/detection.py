@@ -149,12 +149,17 @@ class ActionContact:
         dx: (3,) end-effector displacement (world frame, m) summed over the steps in contact:
             the paper's dx_t, the motion that the touched objects are assumed to follow.
         n_contact_steps: number of steps whose residual exceeded the threshold.
+        peak_force: the largest magnitude of the estimated external force on the end effector
+            over those steps (N; NaN when no force was given, 0 with no step in contact).
+            Whether the touched object gave way: a light object slides at a few newtons, a
+            heavy or blocked one resists up to the controller's push limit.
     """
 
     action_index: int = -1
     in_contact: bool = False
     dx: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3))
     n_contact_steps: int = 0
+    peak_force: float = float("nan")
 
 
 class ActionContactAccumulator:
@@ -162,17 +167,20 @@ class ActionContactAccumulator:
 
     State is one flat float vector (so a Drake system can keep it as discrete state); these
     static methods read and write it. Layout (``SIZE`` entries):
-    ``[prev_position(3), has_prev, action, dx(3), n_contact, done_action, done_dx(3), done_n]``.
+    ``[prev_position(3), has_prev, action, dx(3), n_contact, done_action, done_dx(3), done_n,
+    peak_force, done_peak_force]``.
 
     At each step, the displacement since the previous step counts into dx when that step is in
     contact. When the action index changes, the displacement of the boundary step is still
     counted in the old action (it was made under the old command), then the old action is closed
-    (its summary is kept as the "completed" action) and the new one starts from zero.
+    (its summary is kept as the "completed" action) and the new one starts from zero. The peak
+    force is the largest ``force`` given at a step in contact (NaN: none given).
     """
 
-    SIZE = 14
+    SIZE = 16
     _PREV, _HAS_PREV, _ACTION, _DX, _N = slice(0, 3), 3, 4, slice(5, 8), 8
     _DONE_ACTION, _DONE_DX, _DONE_N = 9, slice(10, 13), 13
+    _PEAK, _DONE_PEAK = 14, 15
 
     @classmethod
     def initial_state(cls) -> np.ndarray:
@@ -180,25 +188,33 @@ class ActionContactAccumulator:
         s = np.zeros(cls.SIZE)
         s[cls._ACTION] = -1.0
         s[cls._DONE_ACTION] = -1.0
+        s[cls._PEAK] = s[cls._DONE_PEAK] = np.nan
         return s
 
     @classmethod
-    def step(cls, state, action_index: int, in_contact: bool, position) -> np.ndarray:
-        """The state after one step at end-effector ``position`` (3,) in world (m)."""
+    def step(cls, state, action_index: int, in_contact: bool, position,
+             force: float = float("nan")) -> np.ndarray:  # fmt: skip
+        """The state after one step at end-effector ``position`` (3,) in world (m), with the
+        estimated external force's magnitude ``force`` (N; NaN: not measured)."""
         s = np.array(state, dtype=np.float64)
         position = np.asarray(position, dtype=np.float64)
         if s[cls._HAS_PREV] and in_contact:
             s[cls._DX] += position - s[cls._PREV]
         if in_contact:
             s[cls._N] += 1.0
+        if not np.isnan(force):
+            peak = 0.0 if np.isnan(s[cls._PEAK]) else s[cls._PEAK]
+            s[cls._PEAK] = max(peak, float(force)) if in_contact else peak
         if int(s[cls._ACTION]) != int(action_index):
             if s[cls._ACTION] >= 0:  # close the running action; before the first one, nothing
                 s[cls._DONE_ACTION] = s[cls._ACTION]
                 s[cls._DONE_DX] = s[cls._DX]
                 s[cls._DONE_N] = s[cls._N]
+                s[cls._DONE_PEAK] = s[cls._PEAK]
             s[cls._ACTION] = float(action_index)
             s[cls._DX] = 0.0
             s[cls._N] = 0.0
+            s[cls._PEAK] = np.nan
         s[cls._PREV] = position
         s[cls._HAS_PREV] = 1.0
         return s
@@ -211,6 +227,7 @@ class ActionContactAccumulator:
             bool(state[cls._N] >= min_contact_steps),
             np.array(state[cls._DX]),
             int(state[cls._N]),
+            float(state[cls._PEAK]),
         )
 
     @classmethod
@@ -221,4 +238,5 @@ class ActionContactAccumulator:
             bool(state[cls._DONE_N] >= min_contact_steps),
             np.array(state[cls._DONE_DX]),
             int(state[cls._DONE_N]),
+            float(state[cls._DONE_PEAK]),
         )

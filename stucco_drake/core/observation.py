@@ -18,11 +18,15 @@ class ActionContacts:
         points: (m, 3) contact points detected during the action (m, world); m = 0 when the
             action made no contact.
         dx: (m, 3) end-effector displacement while in contact, one row per point (m, world).
+        peak_force: the largest estimated external force on the end effector while in contact
+            during the action (N; NaN: not measured; see
+            :class:`~stucco_drake.core.detection.ActionContact`).
     """
 
     action_index: int = -1
     points: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
     dx: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    peak_force: float = float("nan")
 
     def __post_init__(self):
         points = as_finite_array(self.points, "ActionContacts.points", (None, 3))

@@ -56,6 +56,14 @@ class RummageParams:
             points place a can at 0.99 or more, so it is probed; a box is placed lower and
             shoved at, and the 10 kg box there stays put while what stands beside it is
             shoved along (a light box would be shoved away).
+        shove_resisted_from: None (off) or a force (N): a push whose felt object resisted,
+            its peak force (the detector's estimate of the external force on the end
+            effector) reaching this, is pushed through at once from where the gripper backs
+            off, whatever ``retouches`` says, as ``shove_first`` with no touch beside, while
+            the belief places that object below ``push_through_below``; one that gave way is
+            touched beside and probed as without ``shove_first``. A heavy or blocked object
+            resists up to the controller's push limit; a light one slides at a few newtons,
+            so it is not shoved away.
         probe_once_placed: before each touch beside, once the touch before has been backed
             off from and its contacts are known, ask the belief again and probe at once if it
             places the felt object, instead of touching beside first (the decision at the
@@ -85,5 +93,6 @@ class RummageParams:
     transit_back: float = 0.04
     push_through_below: float = 0.5
     shove_first: bool = False
+    shove_resisted_from: float | None = None
     probe_once_placed: bool = False
     check_each_probe: bool = False

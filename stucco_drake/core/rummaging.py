@@ -96,6 +96,7 @@ class BeliefRummagingPolicy:
         self.confidence, self.pose = 0.0, None
         self._lane, self._lane_bumps, self._retouches = -1, 0, 0
         self._touch_y, self._contact_xy = 0.0, None
+        self._peak_force = float("nan")  # the last action's (N), see felt_force
         # The touch beside under way while it is reached by the near way (its y and push
         # end), to be reached by the lanes' x instead if that way bumps.
         self._near_retouch: tuple[float, float] | None = None
@@ -149,6 +150,19 @@ class BeliefRummagingPolicy:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if len(points):
             self._contact_xy = points[:, :2].mean(axis=0)
+
+    def felt_force(self, peak_force: float) -> None:
+        """The peak force (N) of the action that just ended (NaN: not measured), given
+        before :meth:`next_step`; read by ``shove_resisted_from``."""
+        self._peak_force = float(peak_force)
+
+    def _resisted(self) -> bool:
+        """Whether the push just felt is one ``shove_resisted_from`` shoves at once: its
+        object resisted (not NaN, at least that force) and the lane is not shoved yet."""
+        p = self.params
+        return (p.shove_resisted_from is not None and not self._shoved
+                and self.confidence < p.push_through_below
+                and self._peak_force >= p.shove_resisted_from)  # NaN compares False
 
     def _believe(self, belief) -> float:
         self.pose, self.confidence = _belief_of(belief)
@@ -243,7 +257,9 @@ class BeliefRummagingPolicy:
         if self._known(belief):
             return None
         back = np.array([-self.params.back_off, 0.0])
-        if self._may_probe():
+        if self._resisted():
+            self._leave_lane(xy, from_touch=True, at_once=True)
+        elif self._may_probe():
             self._probe = self._new_probe()
         elif self._retouches < self.params.retouches:
             if self._retouches == 0:
@@ -300,16 +316,17 @@ class BeliefRummagingPolicy:
         """Back along -x to the lanes' x at ``xy``'s y; then the next lane."""
         self._queue = [("move", np.array([self.lanes[self._lane, 0, 0], xy[1]]))]
 
-    def _leave_lane(self, xy, from_touch: bool = False) -> None:
+    def _leave_lane(self, xy, from_touch: bool = False, at_once: bool = False) -> None:
         """Done with what the lane's push felt: withdraw, or, where the belief places it
         with a confidence below ``push_through_below``, push the lane through (once; with
-        ``shove_first``, from where the gripper backs off to when ``xy`` is a touch's)."""
+        ``shove_first`` or ``at_once``, from where the gripper backs off to when ``xy`` is a
+        touch's)."""
         if self._shoved or self.confidence >= self.params.push_through_below:
             self._withdraw(xy)
             return
         self._shoved, self.shoves = True, self.shoves + 1
         start, far, back = self.lanes[self._lane]
-        if self.params.shove_first and from_touch:  # on from where the gripper backs off to
+        if (self.params.shove_first or at_once) and from_touch:  # on from the back-off
             self._queue = [("move", np.array([xy[0] - self.params.back_off, start[1]]))]
         else:
             self._queue = [("move", np.array([start[0], xy[1]])), ("move", start)]

@@ -17,6 +17,8 @@ Layout (format version 2; T actions, N contacts, k objects; metres, radians, wor
   (m, 0 in contact), or (0, k) when the producer did not log it.
 - ``robot_shape`` (7,) the EE as a primitive (for pxpen), or (0,) when the replayer must be
   given the robot's penetration.
+- ``action_peak_force`` (T,): the largest estimated external force on the EE while in contact
+  in each action (N, NaN where not measured), or (0,) in logs made before it was recorded.
 - ``final_state``: opaque float array (e.g. the final plant state), for the grasp attempt.
 - metadata: ``scene``, ``seed``, ``action_noise`` (m, half-width of the uniform noise added
   to every action axis), ``format_version``, ``info`` (JSON object, free-form).
@@ -94,8 +96,11 @@ _ARRAYS = {  # array field -> dtype; shapes are checked in EpisodeLog.validate()
     "shape_object": np.int64,
     "robot_object_distance": np.float64,
     "robot_shape": np.float64,
+    "action_peak_force": np.float64,
     "final_state": np.float64,
 }
+#: Arrays a log of this format version may lack (written later): read as empty.
+_OPTIONAL = ("action_peak_force",)
 
 
 @dataclasses.dataclass
@@ -118,6 +123,7 @@ class EpisodeLog:
     robot_shape: np.ndarray
     final_state: np.ndarray
     shape_object: np.ndarray | None = None  # default: one shape per object, in order
+    action_peak_force: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     info: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
@@ -157,6 +163,7 @@ class EpisodeLog:
             contact_points=self.contact_points[cut], contact_dx=self.contact_dx[cut],
             contact_object=self.contact_object[cut], object_poses=self.object_poses[:actions + 1],
             robot_object_distance=distances[:actions] if len(distances) else distances,
+            action_peak_force=self.action_peak_force[:actions],
             final_state=np.zeros(0), info={**self.info, "first_actions": int(actions)},
         )  # fmt: skip
 
@@ -193,6 +200,9 @@ class EpisodeLog:
                 f"robot_object_distance: expected shape ({t}, {k}) or (0, {k}), "
                 f"got {self.robot_object_distance.shape}"
             )
+        if self.action_peak_force.shape not in ((t,), (0,)):
+            raise ValueError(f"action_peak_force: expected shape ({t},) or (0,), "
+                             f"got {self.action_peak_force.shape}")
         if self.robot_shape.shape not in ((7,), (0,)):
             raise ValueError(
                 f"robot_shape: expected shape (7,) or (0,), got {self.robot_shape.shape}"
@@ -231,7 +241,8 @@ class EpisodeLog:
                         f"{path}: episode log format version {version}, this code reads version "
                         f"{FORMAT_VERSION} (re-simulate the episode)"
                     )
-                fields = {name: data[name] for name in _ARRAYS}
+                fields = {name: data[name] for name in _ARRAYS
+                          if name in data.files or name not in _OPTIONAL}
                 return cls(
                     scene=str(data["scene"]),
                     seed=int(data["seed"]),

@@ -194,7 +194,7 @@ class ActionContactsAssembler(LeafSystem):
         dx = np.tile(np.asarray(done.dx, dtype=float).reshape(1, 3), (len(points), 1))
         return dataclasses.replace(
             old,
-            completed=ActionContacts(done.action_index, points, dx),
+            completed=ActionContacts(done.action_index, points, dx, done.peak_force),
             completed_truth=truth,
             ee_pose=pose_from_vector(self._pose.Eval(context)),
             detected_without_point=missed,

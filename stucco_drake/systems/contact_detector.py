@@ -86,6 +86,8 @@ class ContactDetector(LeafSystem):
         ee_position: (3,) end-effector position in world (m), e.g. the estimator's output.
         action_index: (1,) index of the action under way (an integer; a change starts a new
             action, so the tracker's update clock and this detector agree on action boundaries).
+        ee_wrench: (6,) [τ (N·m); f (N)], the estimated external wrench on the end effector,
+            e.g. the estimator's (optional: unconnected, the actions' ``peak_force`` is NaN).
 
     Output ports (updated every ``time_step`` s; each reads the inputs' values at the tick, so it
     trails the estimator by one step):
@@ -112,6 +114,7 @@ class ContactDetector(LeafSystem):
         self._chi2 = self.DeclareVectorInputPort("residual_chi2", 1)
         self._position = self.DeclareVectorInputPort("ee_position", 3)
         self._action = self.DeclareVectorInputPort("action_index", 1)
+        self._wrench = self.DeclareVectorInputPort("ee_wrench", 6)
         self._acc = self.DeclareDiscreteState(ActionContactAccumulator.initial_state())
         self._flag = self.DeclareDiscreteState(1)
         self.DeclareStateOutputPort("in_contact", self._flag)
@@ -128,8 +131,10 @@ class ContactDetector(LeafSystem):
         position = self._read(context, self._position)
         action = round(float(self._read(context, self._action)[0]))
         in_contact = bool(chi2 > self.threshold)
+        force = (float(np.linalg.norm(self._read(context, self._wrench)[3:]))
+                 if self._wrench.HasValue(context) else float("nan"))  # fmt: skip
         acc = context.get_discrete_state(self._acc).get_value()
-        new = ActionContactAccumulator.step(acc, action, in_contact, position)
+        new = ActionContactAccumulator.step(acc, action, in_contact, position, force)
         discrete_state.get_mutable_vector(self._acc).SetFromVector(new)
         discrete_state.get_mutable_vector(self._flag).SetFromVector([float(in_contact)])
 

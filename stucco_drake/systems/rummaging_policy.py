@@ -54,7 +54,8 @@ class RummagingPolicy(LeafSystem):
     Input ports:
         body_poses: the plant's body poses (list of RigidTransform by BodyIndex).
         current_action: the detector's :class:`ActionContact` of the action under way (at an
-            action's start: of the action that just ended).
+            action's start: of the action that just ended); its ``in_contact`` is given to the
+            policy, and its ``peak_force`` too to a policy that has ``felt_force(newtons)``.
         pose_hypotheses: the target-pose estimator's hypotheses (None: none yet); evaluated
             only when the policy asks (they are costly).
         action_contacts: the latest formed :class:`ActionContacts` (the assembler's; an
@@ -119,6 +120,8 @@ class RummagingPolicy(LeafSystem):
         verdict = self._verdict.Eval(context)
         if hasattr(policy, "sensed") and self._contacts.HasValue(context):
             policy.sensed(self._contacts.Eval(context).points)
+        if hasattr(policy, "felt_force"):
+            policy.felt_force(verdict.peak_force)
         step = policy.next_step(X_WG.translation()[:2], bool(verdict.in_contact),
                                 lambda: self._hypotheses.Eval(context))
         return PolicyState(policy, k, None if step is None else np.asarray(step, dtype=float))

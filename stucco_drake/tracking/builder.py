@@ -182,7 +182,7 @@ def _add_proprioception(builder, h, robot: ObservedRobot, joint_state, joint_tor
     builder.Connect(joint_torque, estimator.GetInputPort("applied_torque"))
     detector = builder.AddNamedSystem("contact_detector", ContactDetector(
         h, default_threshold() if threshold is None else threshold))  # fmt: skip
-    for name in ("residual_chi2", "ee_position"):
+    for name in ("residual_chi2", "ee_position", "ee_wrench"):
         builder.Connect(estimator.GetOutputPort(name), detector.GetInputPort(name))
     builder.Connect(action_index, detector.GetInputPort("action_index"))
     # Its own context on the same robot plant: the pose may be evaluated at any time.
