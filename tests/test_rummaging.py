@@ -385,31 +385,34 @@ def test_shove_first_pushes_an_unsure_lane_through_from_the_touch_then_probes():
 
 
 def test_a_push_the_felt_object_resisted_is_shoved_through_at_once():
-    """The scene above, with ``shove_resisted_from`` 20 N. A first touch felt at 30 N (the
-    object did not give way) is pushed through at once from where the gripper backed off
-    (x 0.161), no touch beside first; at 3 N (it gave way) or unmeasured (NaN) the policy
-    probes first, as by default."""
+    """The scene above, with ``shove_resisted_from`` 20 N: a first touch felt at 30 N (the
+    object did not give way) has the lane pushed through at once from where the gripper backed
+    off (x 0.161), no touch beside first; at 3 N (it gave way) or unmeasured (NaN) the policy
+    probes first, as by default. With ``press_step`` the touch is followed by a press, one more
+    action along the push, and the press's force decides."""
     pose = np.array([0.3, 0.17, np.radians(90)])
-    for force, shoves in ((30.0, True), (3.0, False), (float("nan"), False)):
-        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
-                                       RummageParams(coverage=BAND_NEAREST, max_actions=80,
-                                                     shove_resisted_from=20.0))  # fmt: skip
-        xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
-        for _ in range(80):
-            policy.felt_force(force if in_contact else 0.0)
-            step = policy.next_step(xy, in_contact, Unsure(pose))
-            if step is None:
-                break
-            kinds.append(policy._kind)
-            positions.append(xy.copy())
-            xy, in_contact = guarded_move(xy, step, pose)
-            touches.append(in_contact and kinds[-1] == "push")
-        shove = kinds.index("shove") if "shove" in kinds else len(kinds)
-        probe = kinds.index("probe")
-        assert (shove < probe) == shoves, force
-        if shoves:
-            assert sum(touches[:shove]) == 1
-            assert positions[shove] == pytest.approx([0.161, 0.10], abs=2e-3)
+    for press_step in (0.0, 0.02):
+        for force, shoves in ((30.0, True), (3.0, False), (float("nan"), False)):
+            params = RummageParams(coverage=BAND_NEAREST, max_actions=80,
+                                   shove_resisted_from=20.0, press_step=press_step)
+            policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+            xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
+            for _ in range(80):
+                policy.felt_force(force if in_contact else 0.0)
+                step = policy.next_step(xy, in_contact, Unsure(pose))
+                if step is None:
+                    break
+                kinds.append(policy._kind)
+                positions.append(xy.copy())
+                xy, in_contact = guarded_move(xy, step, pose)
+                touches.append(in_contact and kinds[-1] == "push")
+            shove = kinds.index("shove") if "shove" in kinds else len(kinds)
+            assert (shove < kinds.index("probe")) == shoves, (press_step, force)
+            pressed = kinds[touches.index(True) + 1] == "press"
+            assert pressed == (press_step > 0) and ("press" in kinds) == pressed
+            if shoves:
+                assert sum(touches[:shove]) == 1
+                assert positions[shove] == pytest.approx([0.161, 0.10], abs=2e-3)
 
 
 class Late(Unsure):

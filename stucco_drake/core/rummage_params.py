@@ -56,14 +56,17 @@ class RummageParams:
             points place a can at 0.99 or more, so it is probed; a box is placed lower and
             shoved at, and the 10 kg box there stays put while what stands beside it is
             shoved along (a light box would be shoved away).
-        shove_resisted_from: None (off) or a force (N): a push whose felt object resisted,
-            its peak force (the detector's estimate of the external force on the end
-            effector) reaching this, is pushed through at once from where the gripper backs
-            off, whatever ``retouches`` says, as ``shove_first`` with no touch beside, while
-            the belief places that object below ``push_through_below``; one that gave way is
-            touched beside and probed as without ``shove_first``. A heavy or blocked object
-            resists up to the controller's push limit; a light one slides at a few newtons,
-            so it is not shoved away.
+        shove_resisted_from: None (off) or a force (N). Where a lane's first touch met an
+            object that resisted, the touch's peak force (the detector's estimate of the
+            external force on the end effector) reaching this, the lane is pushed through at
+            once from where the gripper backs off, whatever ``retouches`` says, as
+            ``shove_first`` with no touch beside, while the belief places that object below
+            ``push_through_below``. One that gave way is touched beside and probed as without
+            ``shove_first``. A heavy or blocked object resists up to the controller's push
+            limit; a light one slides at a few newtons, so it is not shoved away.
+        press_step: 0, or a distance (m): with ``shove_resisted_from``, the touch goes on
+            along the push by this much for one more action, a press, whose force decides
+            instead: a touch may come at the end of its action, before the force builds up.
         probe_once_placed: before each touch beside, once the touch before has been backed
             off from and its contacts are known, ask the belief again and probe at once if it
             places the felt object, instead of touching beside first (the decision at the
@@ -94,5 +97,6 @@ class RummageParams:
     push_through_below: float = 0.5
     shove_first: bool = False
     shove_resisted_from: float | None = None
+    press_step: float = 0.0
     probe_once_placed: bool = False
     check_each_probe: bool = False

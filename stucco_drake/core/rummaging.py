@@ -85,7 +85,8 @@ class BeliefRummagingPolicy:
         self.trace: list[tuple[int, float]] = []
         # Actions by what they were for: "push" (a lane's or a touch beside's, guarded),
         # "shove" (pushed through), "travel", "back_off" (from a push's or a travel's
-        # contact) and "probe" (a probe round's, its travel included).
+        # contact), "press" (see shove_resisted_from) and "probe" (a probe round's, its
+        # travel included).
         self.action_kinds: dict[str, int] = {}
         self._phases_done: dict[str, int] = {}  # the finished probe rounds' actions by phase
         self._kind = "travel"
@@ -157,12 +158,21 @@ class BeliefRummagingPolicy:
         self._peak_force = float(peak_force)
 
     def _resisted(self) -> bool:
-        """Whether the push just felt is one ``shove_resisted_from`` shoves at once: its
-        object resisted (not NaN, at least that force) and the lane is not shoved yet."""
+        """Whether the touch (or press) just made is one ``shove_resisted_from`` shoves at
+        once after: its object resisted (not NaN, at least that force) and the lane is not
+        shoved yet."""
         p = self.params
         return (p.shove_resisted_from is not None and not self._shoved
                 and self.confidence < p.push_through_below
                 and self._peak_force >= p.shove_resisted_from)  # NaN compares False
+
+    def _press(self) -> np.ndarray:
+        """One more action along the push that felt something (see
+        ``shove_resisted_from``); the next decision reads its force."""
+        self._queue = [("pressed", np.zeros(2))]
+        self._kind, self._moving = "press", False
+        push = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
+        return push * self.params.press_step
 
     def _believe(self, belief) -> float:
         self.pose, self.confidence = _belief_of(belief)
@@ -210,6 +220,9 @@ class BeliefRummagingPolicy:
         return step
 
     def _decide(self, xy, in_contact: bool, belief):
+        if self._queue and self._queue[0][0] == "pressed":
+            self._queue.pop(0)
+            return self._felt(xy, belief, pressed=True)
         if self._probe is not None:
             step = self._probe_step(xy, in_contact, belief)
             if step is not None or self._stopping:
@@ -250,12 +263,18 @@ class BeliefRummagingPolicy:
         return FaceProbePolicy(self.shape, self.footprint, self.max_step, self.params.probe,
                                self.in_workspace)
 
-    def _felt(self, xy, belief) -> np.ndarray | None:
-        """A push sensed contact: stop if the target is known, else probe it if the belief
-        places it (and rounds are left), else touch it again beside the first touch (see
-        ``retouches``), else leave the lane (:meth:`_leave_lane`); first back off."""
+    def _felt(self, xy, belief, pressed: bool = False) -> np.ndarray | None:
+        """A push sensed contact: stop if the target is known, else (with
+        ``shove_resisted_from``) press it once and push the lane through if it resisted, else
+        probe it if the belief places it (and rounds are left), else touch it again beside the
+        first touch (see ``retouches``), else leave the lane (:meth:`_leave_lane`); first back
+        off."""
         if self._known(belief):
             return None
+        p = self.params
+        if (p.shove_resisted_from is not None and p.press_step > 0
+                and not (pressed or self._shoved) and self._retouches == 0):  # a first touch
+            return self._press()
         back = np.array([-self.params.back_off, 0.0])
         if self._resisted():
             self._leave_lane(xy, from_touch=True, at_once=True)
