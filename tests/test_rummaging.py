@@ -345,6 +345,27 @@ class Unsure:
         return self
 
 
+def play_kinds(policy, pose, force=None, contact_y=None, limit=80):
+    """Plays ``policy`` against BOX at ``pose``, placed by :class:`Unsure`: (each action's
+    kind, the gripper's position before it, whether it was a push that touched). ``force``
+    (N, None: not given) is each touch's peak force (0 out of contact); with ``contact_y``
+    (the gripper's y -> the contact's y), each contact's point is given to the policy."""
+    xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
+    for _ in range(limit):
+        if force is not None:
+            policy.felt_force(force if in_contact else 0.0)
+        step = policy.next_step(xy, in_contact, Unsure(pose))
+        if step is None:
+            break
+        kinds.append(policy._kind)
+        positions.append(xy.copy())
+        xy, in_contact = guarded_move(xy, step, pose)
+        touches.append(in_contact and kinds[-1] == "push")
+        if in_contact and contact_y is not None:
+            policy.sensed([[xy[0] + 0.04, contact_y(xy[1]), 0.1]])
+    return kinds, positions, touches
+
+
 def test_shove_first_pushes_an_unsure_lane_through_from_the_touch_then_probes():
     """The box (x 0.221..0.379, y 0.14..0.20) is placed at a confidence of 0.3 from the
     first touch on. By default the policy probes it at once. With ``shove_first`` it touches
@@ -362,17 +383,7 @@ def test_shove_first_pushes_an_unsure_lane_through_from_the_touch_then_probes():
                                        RummageParams(coverage=BAND_NEAREST, max_actions=80,
                                                      retouch_back=0.0,
                                                      shove_first=shove_first))  # fmt: skip
-        xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
-        for _ in range(80):
-            step = policy.next_step(xy, in_contact, Unsure(pose))
-            if step is None:
-                break
-            kinds.append(policy._kind)
-            positions.append(xy.copy())
-            xy, in_contact = guarded_move(xy, step, pose)
-            touches.append(in_contact and kinds[-1] == "push")
-            if in_contact:
-                policy.sensed([[xy[0] + 0.04, overlap_middle(xy[1]), 0.1]])
+        kinds, positions, touches = play_kinds(policy, pose, contact_y=overlap_middle)
         shove = kinds.index("shove") if "shove" in kinds else len(kinds)
         probe = kinds.index("probe")
         if not shove_first:
@@ -396,16 +407,7 @@ def test_a_push_the_felt_object_resisted_is_shoved_through_at_once():
             params = RummageParams(coverage=BAND_NEAREST, max_actions=80,
                                    shove_resisted_from=20.0, press_step=press_step)
             policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
-            xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
-            for _ in range(80):
-                policy.felt_force(force if in_contact else 0.0)
-                step = policy.next_step(xy, in_contact, Unsure(pose))
-                if step is None:
-                    break
-                kinds.append(policy._kind)
-                positions.append(xy.copy())
-                xy, in_contact = guarded_move(xy, step, pose)
-                touches.append(in_contact and kinds[-1] == "push")
+            kinds, positions, touches = play_kinds(policy, pose, force=force)
             shove = kinds.index("shove") if "shove" in kinds else len(kinds)
             assert (shove < kinds.index("probe")) == shoves, (press_step, force)
             pressed = kinds[touches.index(True) + 1] == "press"
