@@ -276,7 +276,7 @@ def run_estimates(args: argparse.Namespace) -> int:
     out = Path(args.table)
     scales, suffix = _motion_scales(args.motion_scales)
     hypothesis_params, _ = hypothesis_settings_of(args.hypothesis_params)
-    if args.stucco_params is not None:
+    if args.stucco_params is not None:  # a bad file is refused before the table is read
         if args.method != "stucco":
             raise InputError(f"--stucco-params: only with --method stucco, not {args.method}")
         from stucco_drake.core.params import SoftTrackingParams
@@ -285,12 +285,11 @@ def run_estimates(args: argparse.Namespace) -> int:
     dx_model, params, stream, recorded = _table_settings(out)
     if args.stucco_params is not None:  # on top of the table's recorded parameters
         params = read_settings("--stucco-params", args.stucco_params, params)
+        suffix = "_" + Path(args.stucco_params).stem + suffix
     if hypothesis_params is None:  # the table's own, as its grasps were made with
         hypothesis_params = recorded
     else:
         suffix += "_" + Path(args.hypothesis_params).stem
-    if args.stucco_params is not None:
-        suffix = "_" + Path(args.stucco_params).stem + suffix
     paths = sorted((out / "logs").glob("*.npz"))
     if not paths:
         raise InputError(f"--table {out}: no episode logs in {out / 'logs'}")
