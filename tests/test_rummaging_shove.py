@@ -1,0 +1,127 @@
+"""The belief rummaging policy's first touch: pushing a lane through (``shove_first``, or
+where the felt object resisted, ``shove_resisted_from``) and probing as soon as the belief
+places what was felt (``probe_once_placed``). Played as in test_rummaging.py, against a box
+the belief places at a confidence of 0.3."""
+
+import numpy as np
+import pytest
+from test_probing import BOX, FOOTPRINT, guarded_move
+from test_rummaging import BAND_NEAREST, MAX_STEP, START
+
+from stucco_drake.core.rummage_params import RummageParams
+from stucco_drake.core.rummaging import BeliefRummagingPolicy
+
+
+class Unsure:
+    """Pose hypotheses stand-in: the box's true pose, always at a confidence of 0.3."""
+
+    def __init__(self, pose):
+        self.pose, self.confidence = pose, 0.3
+
+    def __call__(self):
+        return self
+
+
+def play_kinds(policy, pose, belief=None, force=None, contact_y=None, limit=80):
+    """Plays ``policy`` against BOX at ``pose``, placed by ``belief`` (default
+    :class:`Unsure`): (each action's kind, the gripper's position before it, whether it was a
+    push that touched). ``force`` (N, None: not given) is each touch's peak force (0 out of
+    contact); with ``contact_y`` (the gripper's y -> the contact's y), each contact's point
+    is given to the policy."""
+    belief = belief or Unsure(pose)
+    xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
+    for _ in range(limit):
+        if force is not None:
+            policy.felt_force(force if in_contact else 0.0)
+        step = policy.next_step(xy, in_contact, belief)
+        if step is None:
+            break
+        kinds.append(policy._kind)
+        positions.append(xy.copy())
+        xy, in_contact = guarded_move(xy, step, pose)
+        touches.append(in_contact and kinds[-1] == "push")
+        if in_contact and contact_y is not None:
+            policy.sensed([[xy[0] + 0.04, contact_y(xy[1]), 0.1]])
+    return kinds, positions, touches
+
+
+def test_shove_first_pushes_an_unsure_lane_through_from_the_touch_then_probes():
+    """The box (x 0.221..0.379, y 0.14..0.20) is placed at a confidence of 0.3 from the
+    first touch on. By default the policy probes it at once. With ``shove_first`` it touches
+    beside twice (towards the contact, at y 0.13 and 0.16, as the test above), then pushes
+    lane 0.10 through from where it backed off (the last touch at x = 0.221 - 0.04 = 0.181,
+    backed off 2 cm: 0.161), never going back to the lanes' start (x -0.04) on the way, and
+    probes after the shove."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+
+    def overlap_middle(y):
+        return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
+
+    for shove_first in (False, True):
+        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                       RummageParams(coverage=BAND_NEAREST, max_actions=80,
+                                                     retouch_back=0.0,
+                                                     shove_first=shove_first))  # fmt: skip
+        kinds, positions, touches = play_kinds(policy, pose, contact_y=overlap_middle)
+        shove = kinds.index("shove") if "shove" in kinds else len(kinds)
+        probe = kinds.index("probe")
+        if not shove_first:
+            assert probe < shove and sum(touches[:probe]) == 1
+            continue
+        assert shove < probe and sum(touches[:shove]) == 3
+        assert positions[shove] == pytest.approx([0.161, 0.10], abs=2e-3)
+        first_touch = touches.index(True)
+        assert min(p[0] for p in positions[first_touch:shove]) > 0.0
+
+
+def test_a_push_the_felt_object_resisted_is_shoved_through_at_once():
+    """The scene above, with ``shove_resisted_from`` 20 N: a first touch felt at 30 N (the
+    object did not give way) has the lane pushed through at once from where the gripper backed
+    off (x 0.161), no touch beside first; at 3 N (it gave way) or unmeasured (NaN) the policy
+    probes first, as by default. With ``press_step`` the touch is followed by a press, one more
+    action along the push, and the press's force decides."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    for press_step in (0.0, 0.02):
+        for force, shoves in ((30.0, True), (3.0, False), (float("nan"), False)):
+            params = RummageParams(coverage=BAND_NEAREST, max_actions=80,
+                                   shove_resisted_from=20.0, press_step=press_step)
+            policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+            kinds, positions, touches = play_kinds(policy, pose, force=force)
+            shove = kinds.index("shove") if "shove" in kinds else len(kinds)
+            assert (shove < kinds.index("probe")) == shoves, (press_step, force)
+            pressed = kinds[touches.index(True) + 1] == "press"
+            assert pressed == (press_step > 0) and ("press" in kinds) == pressed
+            if shoves:
+                assert sum(touches[:shove]) == 1
+                assert positions[shove] == pytest.approx([0.161, 0.10], abs=2e-3)
+
+
+class Late(Unsure):
+    """:class:`Unsure`, but asked at the first touch itself it has no pose yet: that touch's
+    contacts reach the tracker an action late, as in the loop."""
+
+    def __init__(self, pose):
+        super().__init__(pose)
+        self.asked = 0
+
+    def __call__(self):
+        self.asked += 1
+        return None if self.asked == 1 else self
+
+
+def test_probe_once_placed_asks_again_after_the_back_off_and_probes_from_the_first_touch():
+    """The box of the test above, the belief placing it only from its second asking (the
+    first is at the first touch). By default the policy touches beside once more, and the
+    belief asked at that second touch starts the probes; with ``probe_once_placed`` it asks
+    again after backing off from the first touch and probes from there, one touch sooner."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    for once_placed in (False, True):
+        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
+                                       RummageParams(coverage=BAND_NEAREST, max_actions=80,
+                                                     retouch_back=0.0,
+                                                     probe_once_placed=once_placed))
+        kinds, _, touches = play_kinds(policy, pose, belief=Late(pose))
+        probe = kinds.index("probe")
+        assert sum(touches[:probe]) == (1 if once_placed else 2)
+        if once_placed:  # straight after the back-off from the touch
+            assert kinds[probe - 1] == "back_off" and kinds[probe - 2] == "push"
