@@ -96,6 +96,30 @@ def test_a_push_the_felt_object_resisted_is_shoved_through_at_once():
                 assert positions[shove] == pytest.approx([0.161, 0.10], abs=2e-3)
 
 
+def test_a_press_that_gave_way_more_easily_than_the_target_could_is_shoved_through():
+    """``shove_gave_way_below`` 0.25 of the target's weight (a 10 kg target: 24.5 N; a
+    0.5 kg one: 1.23 N): a press felt at 3 N slid something lighter than a 10 kg target, so
+    the lane is pushed through at once from where the gripper backed off; at 30 N (no
+    ``shove_resisted_from``), or against a 0.5 kg target, the policy probes first. The rule
+    needs a press and the target's mass, and says so before any play."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    params = RummageParams(coverage=BAND_NEAREST, max_actions=80, press_step=0.02,
+                           shove_gave_way_below=0.25)
+    for mass, force, shoves in ((10.0, 3.0, True), (10.0, 30.0, False), (0.5, 3.0, False)):
+        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params,
+                                       target_mass=mass)
+        kinds, positions, touches = play_kinds(policy, pose, force=force)
+        shove = kinds.index("shove") if "shove" in kinds else len(kinds)
+        assert (shove < kinds.index("probe")) == shoves, (mass, force)
+        assert kinds[touches.index(True) + 1] == "press"
+        if shoves:
+            assert positions[shove] == pytest.approx([0.161, 0.10], abs=2e-3)
+    with pytest.raises(ValueError, match="target's mass"):
+        BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    with pytest.raises(ValueError, match="needs press_step"):
+        RummageParams(shove_gave_way_below=0.25)
+
+
 class Late(Unsure):
     """:class:`Unsure`, but asked at the first touch itself it has no pose yet: that touch's
     contacts reach the tracker an action late, as in the loop."""

@@ -57,8 +57,10 @@ def add_policy(builder: DiagramBuilder, sub, built: BuiltScene, chain, settings:
                                in_workspace=scene.in_workspace)
     elif isinstance(settings, RummageParams):
         prescribed = np.zeros((0, 2))
+        target_mass = built.free_bodies[scene.target].default_mass()  # known with its model
         core = BeliefRummagingPolicy(target_shape, shape_xy, max_step, scene.gripper_start.xy,
-                                     settings, in_workspace=scene.in_workspace)
+                                     settings, in_workspace=scene.in_workspace,
+                                     target_mass=target_mass)
     else:
         raise TypeError(f"no policy for settings of type {type(settings).__name__}")
     policy = builder.AddNamedSystem("rummaging_policy", RummagingPolicy(

@@ -67,6 +67,13 @@ class RummageParams:
         press_step: 0, or a distance (m): with ``shove_resisted_from``, the touch goes on
             along the push by this much for one more action, a press, whose force decides
             instead: a touch may come at the end of its action, before the force builds up.
+        shove_gave_way_below: None (off) or a fraction of the known target's weight (its
+            mass times g; the policy is given the mass). A press (``press_step``) whose peak
+            force stays below this fraction of it met something that slid more easily than
+            the target can (the target needs its friction force, about half its weight on the
+            table, to slide), so it is not the target: the lane is pushed through at once, as
+            for an object that resisted. Needs ``press_step`` (a touch alone may end before
+            its force builds up).
         probe_once_placed: before each touch beside, once the touch before has been backed
             off from and its contacts are known, ask the belief again and probe at once if it
             places the felt object, instead of touching beside first (the decision at the
@@ -98,5 +105,11 @@ class RummageParams:
     shove_first: bool = False
     shove_resisted_from: float | None = None
     press_step: float = 0.0
+    shove_gave_way_below: float | None = None
     probe_once_placed: bool = False
     check_each_probe: bool = False
+
+    def __post_init__(self):
+        if self.shove_gave_way_below is not None and not self.press_step > 0:
+            raise ValueError("shove_gave_way_below: needs press_step > 0 (a touch alone may "
+                             "end before its force builds up)")

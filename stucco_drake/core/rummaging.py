@@ -40,6 +40,8 @@ from stucco_drake.core.probing import FaceProbePolicy
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
+GRAVITY = 9.81  # m/s^2
+
 
 def _belief_of(belief) -> tuple[np.ndarray | None, float]:
     """(likeliest pose or None, confidence) of the pose hypotheses ``belief`` (an object with
@@ -66,12 +68,17 @@ class BeliefRummagingPolicy:
         start_xy: where the gripper starts (the lanes start and end at its x).
         params: the settings.
         in_workspace: whether a planar point (W) is one the gripper may be sent to.
+        target_mass: the target's known mass (kg), needed by ``shove_gave_way_below``.
     """
 
     def __init__(self, shape: BoxSdf | CylinderSdf, footprint, max_step: float, start_xy,
                  params: RummageParams | None = None,
-                 in_workspace: Callable[[np.ndarray], bool] | None = None):  # fmt: skip
+                 in_workspace: Callable[[np.ndarray], bool] | None = None,
+                 target_mass: float | None = None):  # fmt: skip
         self.shape, self.params = shape, params or RummageParams()
+        if self.params.shove_gave_way_below is not None and target_mass is None:
+            raise ValueError("shove_gave_way_below: the policy needs the target's mass")
+        self.target_weight = None if target_mass is None else float(target_mass) * GRAVITY
         self.footprint = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
         self.max_step = float(max_step)
         self.in_workspace = in_workspace or (lambda xy: True)
@@ -154,21 +161,25 @@ class BeliefRummagingPolicy:
 
     def felt_force(self, peak_force: float) -> None:
         """The peak force (N) of the action that just ended (NaN: not measured), given
-        before :meth:`next_step`; read by ``shove_resisted_from``."""
+        before :meth:`next_step`; read by ``shove_resisted_from`` and ``shove_gave_way_below``."""
         self._peak_force = float(peak_force)
 
-    def _resisted(self) -> bool:
-        """Whether the touch (or press) just made is one ``shove_resisted_from`` shoves at
-        once after: its object resisted (not NaN, at least that force) and the lane is not
-        shoved yet."""
-        p = self.params
-        return (p.shove_resisted_from is not None and not self._shoved
-                and self.confidence < p.push_through_below
-                and self._peak_force >= p.shove_resisted_from)  # NaN compares False
+    def _shoves_at_once(self, pressed: bool) -> bool:
+        """Whether the lane is pushed through at once after the touch (or press) just made:
+        not shoved yet, the felt object placed below ``push_through_below``, and its force
+        (NaN compares False) either resisted (``shove_resisted_from``) or, after a press,
+        gave way more easily than the target could (``shove_gave_way_below``)."""
+        p, force = self.params, self._peak_force
+        if self._shoved or self.confidence >= p.push_through_below:
+            return False
+        resisted = p.shove_resisted_from is not None and force >= p.shove_resisted_from
+        gave_way = (pressed and p.shove_gave_way_below is not None
+                    and force < p.shove_gave_way_below * self.target_weight)
+        return resisted or gave_way
 
     def _press(self) -> np.ndarray:
-        """One more action along the push that felt something (see
-        ``shove_resisted_from``); the next decision reads its force."""
+        """One more action along the push that felt something (see ``press_step``); the
+        next decision reads its force."""
         self._queue = [("pressed", np.zeros(2))]
         self._kind, self._moving = "press", False
         push = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
@@ -265,18 +276,20 @@ class BeliefRummagingPolicy:
 
     def _felt(self, xy, belief, pressed: bool = False) -> np.ndarray | None:
         """A push sensed contact: stop if the target is known, else (with
-        ``shove_resisted_from``) press it once and push the lane through if it resisted, else
+        ``shove_resisted_from`` or ``shove_gave_way_below``) press it once and push the lane
+        through if its force says so (:meth:`_shoves_at_once`), else
         probe it if the belief places it (and rounds are left), else touch it again beside the
         first touch (see ``retouches``), else leave the lane (:meth:`_leave_lane`); first back
         off."""
         if self._known(belief):
             return None
         p = self.params
-        if (p.shove_resisted_from is not None and p.press_step > 0
+        decides = p.shove_resisted_from is not None or p.shove_gave_way_below is not None
+        if (decides and p.press_step > 0
                 and not (pressed or self._shoved) and self._retouches == 0):  # a first touch
             return self._press()
         back = np.array([-self.params.back_off, 0.0])
-        if self._resisted():
+        if self._shoves_at_once(pressed):
             self._leave_lane(xy, from_touch=True, at_once=True)
         elif self._may_probe():
             self._probe = self._new_probe()
