@@ -26,13 +26,15 @@ def play_kinds(policy, pose, belief=None, force=None, contact_y=None, limit=80):
     """Plays ``policy`` against BOX at ``pose``, placed by ``belief`` (default
     :class:`Unsure`): (each action's kind, the gripper's position before it, whether it was a
     push that touched). ``force`` (N, None: not given) is each touch's peak force (0 out of
-    contact); with ``contact_y`` (the gripper's y -> the contact's y), each contact's point
-    is given to the policy."""
+    contact), or a function of the kind of action that touched giving it; with
+    ``contact_y`` (the gripper's y -> the contact's y), each contact's point is given to the
+    policy."""
     belief = belief or Unsure(pose)
     xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
     for _ in range(limit):
         if force is not None:
-            policy.felt_force(force if in_contact else 0.0)
+            felt = force(kinds[-1]) if callable(force) and in_contact else force
+            policy.felt_force(felt if in_contact else 0.0)
         step = policy.next_step(xy, in_contact, belief)
         if step is None:
             break
@@ -118,6 +120,30 @@ def test_a_press_that_gave_way_more_easily_than_the_target_could_is_shoved_throu
         BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
     with pytest.raises(ValueError, match="needs press_step"):
         RummageParams(shove_gave_way_below=0.25)
+
+
+def test_a_shove_past_what_gave_way_ends_where_something_resists():
+    """The press above gave way (3 N, a 10 kg target), and the shove then meets the box at
+    45 N (its first step does). With ``shove_stops_from`` 30 N the shove ends there: the
+    gripper backs off and probes from where it is, where without it the stalled shove first
+    goes back to the lanes' x (a travel) before the probe. A shove begun because the press
+    resisted (45 N) is not ended by it."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    for stops_from in (None, 30.0):
+        for press_force in (3.0, 45.0):
+            params = RummageParams(coverage=BAND_NEAREST, max_actions=80, press_step=0.02,
+                                   shove_gave_way_below=0.25, shove_resisted_from=20.0,
+                                   shove_stops_from=stops_from)  # fmt: skip
+            policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params,
+                                           target_mass=10.0)
+            kinds, _, _ = play_kinds(
+                policy, pose, force=lambda kind: press_force if kind != "shove" else 45.0)
+            shove, probe = kinds.index("shove"), kinds.index("probe")
+            between = kinds[shove:probe]
+            ends = stops_from is not None and press_force < 20.0
+            assert ("travel" not in between) == ends, (stops_from, press_force, between)
+            if ends:
+                assert between == ["shove", "back_off"]
 
 
 class Late(Unsure):

@@ -74,6 +74,13 @@ class RummageParams:
             table, to slide), so it is not the target: the lane is pushed through at once, as
             for an object that resisted. Needs ``press_step`` (a touch alone may end before
             its force builds up).
+        shove_stops_from: None (off) or a force (N). A lane pushed through because its press
+            gave way (``shove_gave_way_below``) ends at the first action of the shove that
+            meets at least this force: the light object is shoved aside and something behind
+            it resists, a candidate for a heavy target. The gripper backs off and the belief
+            is asked at once (probed if it places the target) instead of pushing on into it
+            and going back to the lanes' x. A shove begun on an object that resisted goes on
+            as before: shoving along a heavy target moves its neighbours aside.
         probe_once_placed: before each touch beside, once the touch before has been backed
             off from and its contacts are known, ask the belief again and probe at once if it
             places the felt object, instead of touching beside first (the decision at the
@@ -106,6 +113,7 @@ class RummageParams:
     shove_resisted_from: float | None = None
     press_step: float = 0.0
     shove_gave_way_below: float | None = None
+    shove_stops_from: float | None = None
     probe_once_placed: bool = False
     check_each_probe: bool = False
 

@@ -100,6 +100,7 @@ class BeliefRummagingPolicy:
         self._lane_rounds = 0
         self._skipped: set[int] = set()
         self._shoved = False
+        self._shove_stops_from: float | None = None  # (N) where the shove under way ends
         self._verified = self._stopping = False
         self.confidence, self.pose = 0.0, None
         self._lane, self._lane_bumps, self._retouches = -1, 0, 0
@@ -164,18 +165,20 @@ class BeliefRummagingPolicy:
         before :meth:`next_step`; read by ``shove_resisted_from`` and ``shove_gave_way_below``."""
         self._peak_force = float(peak_force)
 
-    def _shoves_at_once(self, pressed: bool) -> bool:
-        """Whether the lane is pushed through at once after the touch (or press) just made:
-        not shoved yet, the felt object placed below ``push_through_below``, and its force
-        (NaN compares False) either resisted (``shove_resisted_from``) or, after a press,
-        gave way more easily than the target could (``shove_gave_way_below``)."""
+    def _shove_cause(self, pressed: bool) -> str | None:
+        """Why the lane is pushed through at once after the touch (or press) just made, or
+        None: not shoved yet, the felt object placed below ``push_through_below``, and its
+        force (NaN compares False) either "resisted" (``shove_resisted_from``) or, after a
+        press, "gave_way" more easily than the target could (``shove_gave_way_below``)."""
         p, force = self.params, self._peak_force
         if self._shoved or self.confidence >= p.push_through_below:
-            return False
-        resisted = p.shove_resisted_from is not None and force >= p.shove_resisted_from
-        gave_way = (pressed and p.shove_gave_way_below is not None
-                    and force < p.shove_gave_way_below * self.target_weight)
-        return resisted or gave_way
+            return None
+        if p.shove_resisted_from is not None and force >= p.shove_resisted_from:
+            return "resisted"
+        if (pressed and p.shove_gave_way_below is not None
+                and force < p.shove_gave_way_below * self.target_weight):
+            return "gave_way"
+        return None
 
     def _press(self) -> np.ndarray:
         """One more action along the push that felt something (see ``press_step``); the
@@ -246,6 +249,8 @@ class BeliefRummagingPolicy:
             self.contacts += 1
             kind = self._queue[0][0] if self._queue else "move"
             if kind == "shove":  # contacts ignored: the push goes on
+                if self._peak_force >= (self._shove_stops_from or np.inf):  # NaN: False
+                    return self._end_shove()
                 return self._follow(xy, belief)
             self._moving = False
             if kind == "push":
@@ -277,7 +282,7 @@ class BeliefRummagingPolicy:
     def _felt(self, xy, belief, pressed: bool = False) -> np.ndarray | None:
         """A push sensed contact: stop if the target is known, else (with
         ``shove_resisted_from`` or ``shove_gave_way_below``) press it once and push the lane
-        through if its force says so (:meth:`_shoves_at_once`), else
+        through if its force says so (:meth:`_shove_cause`), else
         probe it if the belief places it (and rounds are left), else touch it again beside the
         first touch (see ``retouches``), else leave the lane (:meth:`_leave_lane`); first back
         off."""
@@ -289,8 +294,11 @@ class BeliefRummagingPolicy:
                 and not (pressed or self._shoved) and self._retouches == 0):  # a first touch
             return self._press()
         back = np.array([-self.params.back_off, 0.0])
-        if self._shoves_at_once(pressed):
+        cause = self._shove_cause(pressed)
+        if cause is not None:
             self._leave_lane(xy, from_touch=True, at_once=True)
+            if cause == "gave_way":
+                self._shove_stops_from = p.shove_stops_from
         elif self._may_probe():
             self._probe = self._new_probe()
         elif self._retouches < self.params.retouches:
@@ -338,6 +346,13 @@ class BeliefRummagingPolicy:
         self._queue = self._retouch_legs(xy, self.lanes[self._lane, 0, 0], y, push_x)
         return self._bounce()
 
+    def _end_shove(self) -> np.ndarray:
+        """A shove met what resists (``shove_stops_from``): back off, then assess."""
+        far = next(point for kind, point in self._queue if kind == "shove")
+        self._queue = [("assess", far)]
+        self._shove_stops_from, self._moving = None, False
+        return self._bounce()
+
     def _bounce(self) -> np.ndarray:
         """The back-off from a travel's contact: back along the last step."""
         back = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
@@ -375,7 +390,7 @@ class BeliefRummagingPolicy:
     def _next_lane(self) -> None:
         self._near_retouch = None
         self._lane, self._lane_bumps, self._retouches = self._lane + 1, 0, 0
-        self._shoved, self._lane_rounds = False, 0
+        self._shoved, self._lane_rounds, self._shove_stops_from = False, 0, None
         while self._lane in self._skipped:
             self._lane += 1
         if self._lane < len(self.lanes):
