@@ -120,6 +120,8 @@ def test_a_press_that_gave_way_more_easily_than_the_target_could_is_shoved_throu
         BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
     with pytest.raises(ValueError, match="needs press_step"):
         RummageParams(shove_gave_way_below=0.25)
+    with pytest.raises(ValueError, match="which is not set"):
+        RummageParams(shove_stops_from=30.0)
 
 
 def test_a_shove_past_what_gave_way_ends_where_something_resists():
@@ -137,7 +139,7 @@ def test_a_shove_past_what_gave_way_ends_where_something_resists():
             policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params,
                                            target_mass=10.0)
             kinds, _, _ = play_kinds(
-                policy, pose, force=lambda kind: press_force if kind != "shove" else 45.0)
+                policy, pose, force=lambda kind, f=press_force: f if kind != "shove" else 45.0)
             shove, probe = kinds.index("shove"), kinds.index("probe")
             between = kinds[shove:probe]
             ends = stops_from is not None and press_force < 20.0

@@ -64,9 +64,10 @@ class RummageParams:
             ``push_through_below``. One that gave way is touched beside and probed as without
             ``shove_first``. A heavy or blocked object resists up to the controller's push
             limit; a light one slides at a few newtons, so it is not shoved away.
-        press_step: 0, or a distance (m): with ``shove_resisted_from``, the touch goes on
-            along the push by this much for one more action, a press, whose force decides
-            instead: a touch may come at the end of its action, before the force builds up.
+        press_step: 0, or a distance (m): with ``shove_resisted_from`` or
+            ``shove_gave_way_below``, the touch goes on along the push by this much for one
+            more action, a press, whose force decides instead: a touch may come at the end of
+            its action, before the force builds up.
         shove_gave_way_below: None (off) or a fraction of the known target's weight (its
             mass times g; the policy is given the mass). A press (``press_step``) whose peak
             force stays below this fraction of it met something that slid more easily than
@@ -121,3 +122,6 @@ class RummageParams:
         if self.shove_gave_way_below is not None and not self.press_step > 0:
             raise ValueError("shove_gave_way_below: needs press_step > 0 (a touch alone may "
                              "end before its force builds up)")
+        if self.shove_stops_from is not None and self.shove_gave_way_below is None:
+            raise ValueError("shove_stops_from: ends only the shoves of "
+                             "shove_gave_way_below, which is not set")

@@ -162,7 +162,7 @@ class BeliefRummagingPolicy:
 
     def felt_force(self, peak_force: float) -> None:
         """The peak force (N) of the action that just ended (NaN: not measured), given
-        before :meth:`next_step`; read by ``shove_resisted_from`` and ``shove_gave_way_below``."""
+        before :meth:`next_step`; read by the ``shove_*`` settings."""
         self._peak_force = float(peak_force)
 
     def _shove_cause(self, pressed: bool) -> str | None:
@@ -282,10 +282,9 @@ class BeliefRummagingPolicy:
     def _felt(self, xy, belief, pressed: bool = False) -> np.ndarray | None:
         """A push sensed contact: stop if the target is known, else (with
         ``shove_resisted_from`` or ``shove_gave_way_below``) press it once and push the lane
-        through if its force says so (:meth:`_shove_cause`), else
-        probe it if the belief places it (and rounds are left), else touch it again beside the
-        first touch (see ``retouches``), else leave the lane (:meth:`_leave_lane`); first back
-        off."""
+        through if its force says so (:meth:`_shove_cause`), else probe it if the belief
+        places it (and rounds are left), else touch it again beside the first touch (see
+        ``retouches``), else leave the lane (:meth:`_leave_lane`); first back off."""
         if self._known(belief):
             return None
         p = self.params
