@@ -92,7 +92,7 @@ class BeliefRummagingPolicy:
         self.trace: list[tuple[int, float]] = []
         # Actions by what they were for: "push" (a lane's or a touch beside's, guarded),
         # "shove" (pushed through), "travel", "back_off" (from a push's or a travel's
-        # contact), "press" (see shove_resisted_from) and "probe" (a probe round's, its
+        # contact), "press" (see press_step) and "probe" (a probe round's, its
         # travel included).
         self.action_kinds: dict[str, int] = {}
         self._phases_done: dict[str, int] = {}  # the finished probe rounds' actions by phase
@@ -249,7 +249,8 @@ class BeliefRummagingPolicy:
             self.contacts += 1
             kind = self._queue[0][0] if self._queue else "move"
             if kind == "shove":  # contacts ignored: the push goes on
-                if self._peak_force >= (self._shove_stops_from or np.inf):  # NaN: False
+                stops = self._shove_stops_from
+                if stops is not None and self._peak_force >= stops:  # NaN compares False
                     return self._end_shove()
                 return self._follow(xy, belief)
             self._moving = False
