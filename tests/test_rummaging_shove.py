@@ -177,3 +177,28 @@ def test_probe_once_placed_asks_again_after_the_back_off_and_probes_from_the_fir
         assert sum(touches[:probe]) == (1 if once_placed else 2)
         if once_placed:  # straight after the back-off from the touch
             assert kinds[probe - 1] == "back_off" and kinds[probe - 2] == "push"
+
+
+def test_a_heavy_object_met_is_touched_on_its_flank_before_anything_else():
+    """The press of the scene above resists (45 N). With ``flank_depth`` 3 cm the lane is not
+    shoved: the gripper backs off, goes right of the box (its contact, y 0.145, was left of
+    the centre line), forward until its front is 3 cm past the face (x 0.211), and pushes
+    left into the box's -y long face (y 0.14: the footprint's left side there at y 0.09).
+    It then backs off and probes, the first shove (if any) after the probe round."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+
+    def overlap_middle(y):
+        return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
+
+    params = RummageParams(coverage=BAND_NEAREST, max_actions=80, press_step=0.02,
+                           shove_resisted_from=20.0, flank_depth=0.03)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    kinds, positions, _ = play_kinds(policy, pose, force=45.0, contact_y=overlap_middle)
+    flank = [i for i, kind in enumerate(kinds) if kind == "flank"]
+    assert flank and kinds.index("press") < flank[0]
+    assert flank[-1] < kinds.index("probe") < (kinds.index("shove") if "shove" in kinds else 99)
+    assert kinds[flank[-1] + 1] == "back_off"
+    touch = positions[flank[-1] + 1]  # where the last flank action left the gripper
+    assert touch == pytest.approx([0.211, 0.09], abs=2e-3)
+    with pytest.raises(ValueError, match="neither is set"):
+        RummageParams(flank_depth=0.03)

@@ -82,6 +82,16 @@ class RummageParams:
             is asked at once (probed if it places the target) instead of pushing on into it
             and going back to the lanes' x. A shove begun on an object that resisted goes on
             as before: shoving along a heavy target moves its neighbours aside.
+        flank_depth: None (off) or a distance (m). A heavy object met, its press resisting
+            (``shove_resisted_from``) or a shove stopping on it (``shove_stops_from``), is
+            touched on its flank before anything else (:mod:`~stucco_drake.core.flank`):
+            the gripper backs off, moves sideways clear of it, forward until its front is this
+            far past the touched face, and pushes sideways back towards the touch, guarded. A
+            box touched on one face only can be read a quarter turn wrong; the face beside
+            it tells. Then the belief is asked (probed if it places the target), else the lane
+            is left as after a touch.
+        flank_margin: how far clear of the object's estimated edge the flank's forward move
+            passes (m).
         probe_once_placed: before each touch beside, once the touch before has been backed
             off from and its contacts are known, ask the belief again and probe at once if it
             places the felt object, instead of touching beside first (the decision at the
@@ -115,6 +125,8 @@ class RummageParams:
     press_step: float = 0.0
     shove_gave_way_below: float | None = None
     shove_stops_from: float | None = None
+    flank_depth: float | None = None
+    flank_margin: float = 0.01
     probe_once_placed: bool = False
     check_each_probe: bool = False
 
@@ -125,3 +137,7 @@ class RummageParams:
         if self.shove_stops_from is not None and self.shove_gave_way_below is None:
             raise ValueError("shove_stops_from: ends only the shoves of "
                              "shove_gave_way_below, which is not set")
+        if (self.flank_depth is not None and self.shove_resisted_from is None
+                and self.shove_stops_from is None):
+            raise ValueError("flank_depth: flanks only what shove_resisted_from or "
+                             "shove_stops_from finds heavy, and neither is set")

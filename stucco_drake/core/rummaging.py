@@ -36,7 +36,8 @@ from collections.abc import Callable
 import numpy as np
 
 from stucco_drake.core.coverage import coverage_waypoints
-from stucco_drake.core.probing import FaceProbePolicy
+from stucco_drake.core.flank import plan_flank
+from stucco_drake.core.probing import FaceProbePolicy, outline_box
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
@@ -81,6 +82,7 @@ class BeliefRummagingPolicy:
         self.target_weight = None if target_mass is None else float(target_mass) * GRAVITY
         self.footprint = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
         self.max_step = float(max_step)
+        self.reach = float(outline_box(np.zeros(3), shape)[1].max())  # the flank's (m)
         self.in_workspace = in_workspace or (lambda xy: True)
         width = float(np.ptp(self.footprint[:, 1]))
         self.lanes = coverage_waypoints(start_xy, self.params.coverage, width,
@@ -251,9 +253,12 @@ class BeliefRummagingPolicy:
             if kind == "shove":  # contacts ignored: the push goes on
                 stops = self._shove_stops_from
                 if stops is not None and self._peak_force >= stops:  # NaN compares False
-                    return self._end_shove()
+                    return self._end_shove(xy)
                 return self._follow(xy, belief)
             self._moving = False
+            if kind == "flank":  # touched: back off, then ask the belief
+                self._queue = [("flanked", xy)]
+                return self._bounce()
             if kind == "push":
                 return self._felt(xy, belief)
             self.bumps += 1
@@ -266,14 +271,17 @@ class BeliefRummagingPolicy:
             return self._bounce()
         return self._follow(xy, belief)
 
-    def _assess(self, xy, belief) -> np.ndarray | None:
-        """After a lane pushed through: stop if the target is known, else probe it if the
-        belief places it (and rounds are left), else go on."""
+    def _assess(self, xy, belief, leave: bool = False) -> np.ndarray | None:
+        """After a lane pushed through (or a flank touch): stop if the target is known,
+        else probe it if the belief places it (and rounds are left), else go on (``leave``:
+        leave the lane, :meth:`_leave_lane`)."""
         if self._known(belief):
             return None
         if self._may_probe():
             self._probe = self._new_probe()
             return self._decide(xy, False, belief)
+        if leave:
+            self._leave_lane(xy)
         return self._follow(xy, belief)
 
     def _new_probe(self) -> FaceProbePolicy:
@@ -295,7 +303,9 @@ class BeliefRummagingPolicy:
             return self._press()
         back = np.array([-self.params.back_off, 0.0])
         cause = self._shove_cause(pressed)
-        if cause is not None:
+        if cause == "resisted" and self._flank(xy):
+            pass  # touched on its flank first
+        elif cause is not None:
             self._leave_lane(xy, from_touch=True, at_once=True)
             if cause == "gave_way":
                 self._shove_stops_from = p.shove_stops_from
@@ -346,12 +356,29 @@ class BeliefRummagingPolicy:
         self._queue = self._retouch_legs(xy, self.lanes[self._lane, 0, 0], y, push_x)
         return self._bounce()
 
-    def _end_shove(self) -> np.ndarray:
-        """A shove met what resists (``shove_stops_from``): back off, then assess."""
+    def _end_shove(self, xy) -> np.ndarray:
+        """A shove met what resists (``shove_stops_from``): back off, then touch its flank
+        (``flank_depth``) or assess."""
         far = next(point for kind, point in self._queue if kind == "shove")
-        self._queue = [("assess", far)]
         self._shove_stops_from, self._moving = None, False
+        if not self._flank(xy):
+            self._queue = [("assess", far)]
         return self._bounce()
+
+    def _flank(self, xy) -> bool:
+        """With ``flank_depth``, queues the flank touch (:func:`~.flank.plan_flank`) of the
+        heavy object the last push met, after the back-off; False when off or not planned."""
+        p = self.params
+        if p.flank_depth is None or self._contact_xy is None:
+            return False
+        flank = plan_flank(xy, self._contact_xy, self._last_step, self.footprint, self.reach,
+                           depth=p.flank_depth, margin=p.flank_margin, back_off=p.back_off,
+                           centred=p.side_margin, in_workspace=self.in_workspace)  # fmt: skip
+        if flank is None:
+            return False
+        self._queue = [("move", flank.side), ("flank", flank.past), ("flank", flank.push_end),
+                       ("flanked", flank.push_end)]  # fmt: skip
+        return True
 
     def _bounce(self) -> np.ndarray:
         """The back-off from a travel's contact: back along the last step."""
@@ -424,14 +451,14 @@ class BeliefRummagingPolicy:
                     return self._decide(xy, False, belief)
                 self._queue[:1] = self._retouch(xy, point)
                 continue
-            if kind == "assess":
+            if kind in ("assess", "flanked"):
                 self._queue.pop(0)
-                return self._assess(xy, belief)
+                return self._assess(xy, belief, leave=kind == "flanked")
             if np.linalg.norm(point - xy) < self.params.arrive_tolerance:
                 self._queue.pop(0)
                 continue
             self._moving = True
-            self._kind = {"push": "push", "shove": "shove"}.get(kind, "travel")
+            self._kind = {"push": "push", "shove": "shove", "flank": "flank"}.get(kind, "travel")
             if kind != "move":  # the way to a touch beside is behind
                 self._near_retouch = None
             # The rest of the leg in equal steps, as few as the clip allows (the sweep's).
