@@ -28,11 +28,19 @@ import numpy as np
 class FlankTouch:
     """The flank touch's waypoints (W, m): ``side`` the sideways move at the backed-off
     distance, ``past`` the forward move beside the object, ``push_end`` where the sideways
-    push towards the touch ends (the gripper's near edge ``depth`` past the contact)."""
+    push towards the touch ends (the gripper's near edge ``depth`` past the contact);
+    ``away`` the unit vector across the push pointing away from the object (the way to go
+    further out when the forward move meets the object still)."""
 
     side: np.ndarray
     past: np.ndarray
     push_end: np.ndarray
+    away: np.ndarray
+
+    def further(self, distance: float) -> FlankTouch:
+        """The same touch with its sideways and forward moves ``distance`` further out."""
+        shift = distance * self.away
+        return FlankTouch(self.side + shift, self.past + shift, self.push_end, self.away)
 
 
 def plan_flank(gripper_xy, contact_xy, push, footprint, reach: float, *, depth: float,
@@ -85,7 +93,7 @@ def plan_flank(gripper_xy, contact_xy, push, footprint, reach: float, *, depth: 
         forward = float(c @ u) + depth - float(along.max())
         push_end = contact_across - side * depth - edges[-side]
         points = FlankTouch(back * u + across_side * n, forward * u + across_side * n,
-                            forward * u + push_end * n)  # fmt: skip
+                            forward * u + push_end * n, side * n)  # fmt: skip
         if all(in_workspace(p) for p in (points.side, points.past)):
             return points
     return None

@@ -103,6 +103,7 @@ class BeliefRummagingPolicy:
         self._skipped: set[int] = set()
         self._shoved = False
         self._shove_stops_from: float | None = None  # (N) where the shove under way ends
+        self._flank_plan, self._flank_tries = None, 0  # the flank touch under way
         self._verified = self._stopping = False
         self.confidence, self.pose = 0.0, None
         self._lane, self._lane_bumps, self._retouches = -1, 0, 0
@@ -177,10 +178,15 @@ class BeliefRummagingPolicy:
             return None
         if p.shove_resisted_from is not None and force >= p.shove_resisted_from:
             return "resisted"
-        if (pressed and p.shove_gave_way_below is not None
-                and force < p.shove_gave_way_below * self.target_weight):
+        if pressed and self._gave_way():
             return "gave_way"
         return None
+
+    def _gave_way(self) -> bool:
+        """Whether the last action's force (NaN: False) stayed below what the target needs
+        to slide (``shove_gave_way_below``; False when that is off)."""
+        fraction = self.params.shove_gave_way_below
+        return fraction is not None and self._peak_force < fraction * self.target_weight
 
     def _press(self) -> np.ndarray:
         """One more action along the push that felt something (see ``press_step``); the
@@ -255,10 +261,11 @@ class BeliefRummagingPolicy:
                 if stops is not None and self._peak_force >= stops:  # NaN compares False
                     return self._end_shove(xy)
                 return self._follow(xy, belief)
+            if kind == "flank_ahead" and self._gave_way():  # pushed along
+                return self._follow(xy, belief)
             self._moving = False
-            if kind == "flank":  # touched: back off, then ask the belief
-                self._queue = [("flanked", xy)]
-                return self._bounce()
+            if kind in ("flank", "flank_ahead"):
+                return self._flank_touched(kind)
             if kind == "push":
                 return self._felt(xy, belief)
             self.bumps += 1
@@ -376,9 +383,26 @@ class BeliefRummagingPolicy:
                            centred=p.side_margin, in_workspace=self.in_workspace)  # fmt: skip
         if flank is None:
             return False
-        self._queue = [("move", flank.side), ("flank", flank.past), ("flank", flank.push_end),
-                       ("flanked", flank.push_end)]  # fmt: skip
+        self._flank_plan, self._flank_tries = flank, 0
+        self._queue = self._flank_legs()
         return True
+
+    def _flank_legs(self) -> list[tuple[str, np.ndarray]]:
+        plan = self._flank_plan
+        return [("move", plan.side), ("flank_ahead", plan.past), ("flank", plan.push_end),
+                ("flanked", plan.push_end)]  # fmt: skip
+
+    def _flank_touched(self, kind: str) -> np.ndarray:
+        """The flank touch met something it did not push along: back off, then ask the
+        belief; or, met while going forward (the object reaches further out than the plan
+        said), go ``flank_step`` further out and try again (``flank_retries`` times)."""
+        if kind == "flank_ahead" and self._flank_tries < self.params.flank_retries:
+            self._flank_tries += 1
+            self._flank_plan = self._flank_plan.further(self.params.flank_step)
+            self._queue = self._flank_legs()
+        else:
+            self._queue = [("flanked", self._flank_plan.push_end)]
+        return self._bounce()
 
     def _bounce(self) -> np.ndarray:
         """The back-off from a travel's contact: back along the last step."""
@@ -458,7 +482,8 @@ class BeliefRummagingPolicy:
                 self._queue.pop(0)
                 continue
             self._moving = True
-            self._kind = {"push": "push", "shove": "shove", "flank": "flank"}.get(kind, "travel")
+            self._kind = {"push": "push", "shove": "shove", "flank": "flank",
+                          "flank_ahead": "flank"}.get(kind, "travel")  # fmt: skip
             if kind != "move":  # the way to a touch beside is behind
                 self._near_retouch = None
             # The rest of the leg in equal steps, as few as the clip allows (the sweep's).
