@@ -15,28 +15,28 @@ guarded: it touches the target's near face again (at 30 N the gripper does not s
 target away), more evidence where it is least certain. It also stops when the lanes or the
 action budget run out.
 
-Two things keep it from wearing itself out on clutter. The gripper travels between lanes a
-little behind its start, clear of what stands just in front of it, and a travel that keeps
-bumping into something gives up every lane beyond it on that side (they are reached the same
-way). And a lane whose felt object the belief still does not place with some confidence, once
-touched again or probed, is pushed through to its far end, contacts ignored: a guarded push
-never gets past clutter standing in front of the target, a shove moves it aside. With
-``shove_first`` that push comes as soon as the touches beside are spent, before any probe, from
-where the gripper backed off: what stands flush beside a heavy target is shoved along, and the
-target is probed after.
+The lanes are walked as :class:`~.lane_walk.LaneWalk` does. A lane whose felt object the
+belief still does not place with some confidence, once touched again or probed, is pushed
+through to its far end, contacts ignored: a guarded push never gets past clutter standing in
+front of the target, a shove moves it aside. With ``shove_first`` that push comes as soon as
+the touches beside are spent, before any probe, from where the gripper backed off: what stands
+flush beside a heavy target is shoved along, and the target is probed after. The force a press
+meets tells a heavy object from a light one (``shove_resisted_from``,
+``shove_gave_way_below``), and a heavy one may be touched on its flank
+(``flank_depth``, :mod:`~.flank`).
 
 Planar points (x, y) in the world frame W (m); the gripper's yaw is fixed.
 """
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable
+from typing import ClassVar
 
 import numpy as np
 
-from stucco_drake.core.coverage import coverage_waypoints
 from stucco_drake.core.flank import plan_flank
+from stucco_drake.core.lane_walk import LaneWalk
 from stucco_drake.core.probing import FaceProbePolicy, outline_box
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
@@ -53,7 +53,7 @@ def _belief_of(belief) -> tuple[np.ndarray | None, float]:
     return np.asarray(belief.pose, dtype=np.float64), float(belief.confidence)
 
 
-class BeliefRummagingPolicy:
+class BeliefRummagingPolicy(LaneWalk):
     """Plays the rummaging one planar step per action (see the module's docstring).
 
     Call :meth:`next_step` at the start of every action with where the gripper is, whether
@@ -72,79 +72,46 @@ class BeliefRummagingPolicy:
         target_mass: the target's known mass (kg), needed by ``shove_gave_way_below``.
     """
 
+    STEP_KINDS: ClassVar[dict[str, str]] = {"push": "push", "shove": "shove", "flank": "flank",
+                                            "flank_ahead": "flank"}
+
     def __init__(self, shape: BoxSdf | CylinderSdf, footprint, max_step: float, start_xy,
                  params: RummageParams | None = None,
                  in_workspace: Callable[[np.ndarray], bool] | None = None,
                  target_mass: float | None = None):  # fmt: skip
-        self.shape, self.params = shape, params or RummageParams()
-        if self.params.shove_gave_way_below is not None and target_mass is None:
+        params = params or RummageParams()
+        if params.shove_gave_way_below is not None and target_mass is None:
             raise ValueError("shove_gave_way_below: the policy needs the target's mass")
+        super().__init__(footprint, max_step, start_xy, params, in_workspace)
+        self.shape = shape
         self.target_weight = None if target_mass is None else float(target_mass) * GRAVITY
-        self.footprint = np.asarray(footprint, dtype=np.float64).reshape(-1, 2)
-        self.max_step = float(max_step)
         self.reach = float(outline_box(np.zeros(3), shape)[1].max())  # the flank's (m)
-        self.in_workspace = in_workspace or (lambda xy: True)
-        width = float(np.ptp(self.footprint[:, 1]))
-        self.lanes = coverage_waypoints(start_xy, self.params.coverage, width,
-                                        self.in_workspace, self.params.transit_back,
-                                        ).reshape(-1, 3, 2)  # fmt: skip
-        self.actions = self.rounds = self.touches = self.contacts = self.bumps = 0
-        self.shoves = 0
+        self.rounds = self.touches = self.shoves = 0
         # (action, confidence) each time the belief was asked.
         self.trace: list[tuple[int, float]] = []
-        # Actions by what they were for: "push" (a lane's or a touch beside's, guarded),
-        # "shove" (pushed through), "travel", "back_off" (from a push's or a travel's
-        # contact), "press" (see press_step) and "probe" (a probe round's, its
+        # action_kinds: "push" (a lane's or a touch beside's, guarded), "shove" (pushed
+        # through), "flank" (see flank_depth), "travel", "back_off" (from a push's or a
+        # travel's contact), "press" (see press_step) and "probe" (a probe round's, its
         # travel included).
-        self.action_kinds: dict[str, int] = {}
         self._phases_done: dict[str, int] = {}  # the finished probe rounds' actions by phase
-        self._kind = "travel"
         self._lane_rounds = 0
-        self._skipped: set[int] = set()
         self._shoved = False
         self._shove_stops_from: float | None = None  # (N) where the shove under way ends
         self._flank_plan, self._flank_tries = None, 0  # the flank touch under way
         self._verified = self._stopping = False
         self.confidence, self.pose = 0.0, None
-        self._lane, self._lane_bumps, self._retouches = -1, 0, 0
-        self._touch_y, self._contact_xy = 0.0, None
         self._peak_force = float("nan")  # the last action's (N), see felt_force
-        # The touch beside under way while it is reached by the near way (its y and push
-        # end), to be reached by the lanes' x instead if that way bumps.
-        self._near_retouch: tuple[float, float] | None = None
-        # The waypoints ahead: (kind, point), kind "push" (a contact there is felt) or "move".
-        self._queue: list[tuple[str, np.ndarray]] = []
-        self._stopped = False
         self._probe: FaceProbePolicy | None = None
-        self._last_step, self._moving, self._last_xy = np.zeros(2), False, None
         self._next_lane()
 
     def copy(self) -> BeliefRummagingPolicy:
         """A copy whose play does not change this one (settings, shape, footprint and lanes
         shared, read only)."""
-        other = copy.copy(self)
-        other._queue = list(self._queue)
-        other._skipped = set(self._skipped)
+        other = super().copy()
         other.trace = list(self.trace)
-        other.action_kinds = dict(self.action_kinds)
         other._phases_done = dict(self._phases_done)
         other._probe = None if self._probe is None else self._probe.copy()
         return other
-
-    def next_step(self, gripper_xy, in_contact: bool, belief) -> np.ndarray | None:
-        """The next action's step (m, W), or None once stopped (see the class docstring)."""
-        if self.actions >= self.params.max_actions or self._stopped:
-            return None
-        xy = np.asarray(gripper_xy, dtype=np.float64)
-        step = self._decide(xy, bool(in_contact), belief)
-        self._last_xy = xy
-        if step is None:
-            self._stopped = True  # for good
-            return None
-        self.actions += 1
-        self.action_kinds[self._kind] = self.action_kinds.get(self._kind, 0) + 1
-        self._last_step = np.clip(step, -self.max_step, self.max_step)
-        return self._last_step
 
     @property
     def probe_phases(self) -> dict[str, int]:
@@ -154,14 +121,6 @@ class BeliefRummagingPolicy:
         for phase, count in (self._probe.phase_actions if self._probe else {}).items():
             phases[phase] = phases.get(phase, 0) + count
         return phases
-
-    def sensed(self, points) -> None:
-        """The contact points (m, W) of the latest action whose contacts are known (they come
-        an action late: an action's contacts are formed after the next one is decided); an
-        empty set keeps the last non-empty one's."""
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        if len(points):
-            self._contact_xy = points[:, :2].mean(axis=0)
 
     def felt_force(self, peak_force: float) -> None:
         """The peak force (N) of the action that just ended (NaN: not measured), given
@@ -268,14 +227,7 @@ class BeliefRummagingPolicy:
                 return self._flank_touched(kind)
             if kind == "push":
                 return self._felt(xy, belief)
-            self.bumps += 1
-            if self._near_retouch is not None:  # round by the lanes' x instead
-                return self._retouch_round(xy)
-            self._lane_bumps += 1
-            if self._lane_bumps > self.params.lane_bumps:
-                self._skip_beyond(xy)
-                self._next_lane()
-            return self._bounce()
+            return self._bumped(xy)
         return self._follow(xy, belief)
 
     def _assess(self, xy, belief, leave: bool = False) -> np.ndarray | None:
@@ -334,35 +286,6 @@ class BeliefRummagingPolicy:
         self._believe(belief)
         return self._may_probe()
 
-    def _retouch(self, xy, far_touch) -> list[tuple[str, np.ndarray]]:
-        """The waypoints of the next touch beside the first (at y ``far_touch[1]``, pushed to
-        x ``far_touch[0]``): back to the lanes' x, sideways, the push, and back."""
-        p = self.params
-        k, self._retouches = self._retouches, self._retouches + 1
-        side = 0.0 if self._contact_xy is None else self._contact_xy[1] - far_touch[1]
-        if abs(side) > p.side_margin:
-            offset = np.sign(side) * (k + 1) * p.retouch_step
-        else:  # centred: one side, then the other
-            offset = (1.0 if k % 2 == 0 else -1.0) * (k // 2 + 1) * p.retouch_step
-        y = far_touch[1] + offset
-        # Sideways along the lanes' x, behind the start: beside the felt object, a step
-        # back from it, often stands its neighbour (unless ``retouch_back`` says nearer).
-        lane_x = self.lanes[self._lane, 0, 0]
-        side_x = lane_x if p.retouch_back is None else max(lane_x, xy[0] - p.retouch_back)
-        self._near_retouch = None if side_x == lane_x else (y, float(far_touch[0]))
-        return self._retouch_legs(xy, side_x, y, far_touch[0])
-
-    def _retouch_legs(self, xy, side_x, y, push_x) -> list[tuple[str, np.ndarray]]:
-        lane_x = self.lanes[self._lane, 0, 0]
-        return [("move", np.array([side_x, xy[1]])), ("move", np.array([side_x, y])),
-                ("push", np.array([push_x, y])), ("move", np.array([lane_x, y]))]
-
-    def _retouch_round(self, xy) -> np.ndarray:
-        """The near way to a touch beside bumped: back off, then the lanes' x way."""
-        (y, push_x), self._near_retouch = self._near_retouch, None
-        self._queue = self._retouch_legs(xy, self.lanes[self._lane, 0, 0], y, push_x)
-        return self._bounce()
-
     def _end_shove(self, xy) -> np.ndarray:
         """A shove met what resists (``shove_stops_from``): back off, then touch its flank
         (``flank_depth``) or assess."""
@@ -404,16 +327,6 @@ class BeliefRummagingPolicy:
             self._queue = [("flanked", self._flank_plan.push_end)]
         return self._bounce()
 
-    def _bounce(self) -> np.ndarray:
-        """The back-off from a travel's contact: back along the last step."""
-        back = self._last_step / max(float(np.linalg.norm(self._last_step)), 1e-9)
-        self._kind = "back_off"
-        return -back * self.params.back_off
-
-    def _withdraw(self, xy) -> None:
-        """Back along -x to the lanes' x at ``xy``'s y; then the next lane."""
-        self._queue = [("move", np.array([self.lanes[self._lane, 0, 0], xy[1]]))]
-
     def _leave_lane(self, xy, from_touch: bool = False, at_once: bool = False) -> None:
         """Done with what the lane's push felt: withdraw, or, where the belief places it
         with a confidence below ``push_through_below``, push the lane through (once; with
@@ -430,63 +343,18 @@ class BeliefRummagingPolicy:
             self._queue = [("move", np.array([start[0], xy[1]])), ("move", start)]
         self._queue += [("shove", far), ("move", back), ("assess", far)]
 
-    def _skip_beyond(self, xy) -> None:
-        """The travel to a waypoint keeps bumping: the lanes that lie beyond the gripper on
-        that side (reached the same way) are given up."""
-        side = np.sign(self._queue[0][1][1] - xy[1]) if self._queue else 0.0
-        for j in range(self._lane + 1, len(self.lanes)):
-            if side and (self.lanes[j, 0, 1] - xy[1]) * side > 0:
-                self._skipped.add(j)
-
     def _next_lane(self) -> None:
-        self._near_retouch = None
-        self._lane, self._lane_bumps, self._retouches = self._lane + 1, 0, 0
         self._shoved, self._lane_rounds, self._shove_stops_from = False, 0, None
-        while self._lane in self._skipped:
-            self._lane += 1
-        if self._lane < len(self.lanes):
-            start, far, back = self.lanes[self._lane]
-            self._queue = [("move", start), ("push", far), ("move", back)]
-        else:
-            self._queue = []
+        super()._next_lane()
 
-    def _follow(self, xy, belief) -> np.ndarray | None:
-        """The step towards the next waypoint (the next lane's once the queue is done), or
-        None once the lanes are done. A waypoint the gripper stopped moving towards without
-        sensing contact (held by something it does not feel) is given up: a push's lane is
-        withdrawn from."""
-        moved = np.inf if self._last_xy is None else np.linalg.norm(xy - self._last_xy)
-        if self._moving and self._queue and moved < 0.2 * np.linalg.norm(self._last_step):
-            if self._queue[0][0] == "push":
-                self._withdraw(xy)
-            else:
-                self._queue.pop(0)
-        for _ in range(3 * len(self.lanes) + 8):
-            if not self._queue:
-                if self._lane >= len(self.lanes):
-                    return None
-                self._next_lane()
-                continue
-            kind, point = self._queue[0]
-            if kind == "retouch":
-                if self.params.probe_once_placed and self._placed_now(belief):
-                    self._queue.pop(0)
-                    self._probe = self._new_probe()
-                    return self._decide(xy, False, belief)
-                self._queue[:1] = self._retouch(xy, point)
-                continue
-            if kind in ("assess", "flanked"):
-                self._queue.pop(0)
-                return self._assess(xy, belief, leave=kind == "flanked")
-            if np.linalg.norm(point - xy) < self.params.arrive_tolerance:
-                self._queue.pop(0)
-                continue
-            self._moving = True
-            self._kind = {"push": "push", "shove": "shove", "flank": "flank",
-                          "flank_ahead": "flank"}.get(kind, "travel")  # fmt: skip
-            if kind != "move":  # the way to a touch beside is behind
-                self._near_retouch = None
-            # The rest of the leg in equal steps, as few as the clip allows (the sweep's).
-            leg = point - xy
-            return leg / np.ceil(float(np.max(np.abs(leg))) / self.max_step - 1e-9)
-        return None
+    def _marker(self, kind: str, point, xy, belief) -> tuple[bool, np.ndarray | None]:
+        """Before a touch beside, with ``probe_once_placed``, probe at once if the belief
+        places the felt object; after a shove (or a flank touch), assess."""
+        if kind == "retouch" and self.params.probe_once_placed and self._placed_now(belief):
+            self._queue.pop(0)
+            self._probe = self._new_probe()
+            return True, self._decide(xy, False, belief)
+        if kind in ("assess", "flanked"):
+            self._queue.pop(0)
+            return True, self._assess(xy, belief, leave=kind == "flanked")
+        return False, None
