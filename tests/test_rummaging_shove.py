@@ -228,3 +228,24 @@ def test_a_flank_that_meets_the_object_going_forward_goes_further_out():
         else:  # stopped at the front face (x 0.27) on the second retry's way forward
             assert last[0] + 0.04 == pytest.approx(0.27, abs=2e-3)
             assert last[1] == pytest.approx(0.01, abs=2e-3)
+
+
+def test_a_shove_along_what_resisted_ends_after_its_touches_then_flanks():
+    """The press of the scene above resists (45 N). With ``shove_resisted_for`` 1 the lane is
+    shoved at once, as without the flank, but the shove ends at its first action in contact
+    (the gripper sliding along the heavy object's face); the gripper backs off there and
+    touches the object's flank, then probes. The setting needs ``shove_resisted_from``."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+
+    def overlap_middle(y):
+        return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
+
+    params = RummageParams(coverage=BAND_NEAREST, max_actions=80, press_step=0.02,
+                           shove_resisted_from=20.0, shove_resisted_for=1, flank_depth=0.03)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    kinds, _, _ = play_kinds(policy, pose, force=45.0, contact_y=overlap_middle)
+    shove, flank, probe = kinds.index("shove"), kinds.index("flank"), kinds.index("probe")
+    assert kinds.index("press") < shove < flank < probe
+    assert kinds[:probe].count("shove") == 1 and kinds[shove + 1] == "back_off"
+    with pytest.raises(ValueError, match="shove_resisted_from, which is not set"):
+        RummageParams(shove_resisted_for=3)

@@ -82,6 +82,11 @@ class RummageParams:
             is asked at once (probed if it places the target) instead of pushing on into it
             and going back to the lanes' x. A shove begun on an object that resisted goes on
             as before: shoving along a heavy target moves its neighbours aside.
+        shove_resisted_for: None (off) or a number of actions. A shove begun because the
+            press resisted ends after this many of its actions have sensed contact (the
+            gripper sliding along the heavy object's face, a contact each), where the gripper
+            backs off and touches the object's flank (``flank_depth``) or asks the belief.
+            Without it, ``flank_depth`` flanks such an object at once, unshoved.
         flank_depth: None (off) or a distance (m). A heavy object met, its press resisting
             (``shove_resisted_from``) or a shove stopping on it (``shove_stops_from``), is
             touched on its flank before anything else (:mod:`~stucco_drake.core.flank`):
@@ -130,6 +135,7 @@ class RummageParams:
     press_step: float = 0.0
     shove_gave_way_below: float | None = None
     shove_stops_from: float | None = None
+    shove_resisted_for: int | None = None
     flank_depth: float | None = None
     flank_margin: float = 0.01
     flank_step: float = 0.03
@@ -144,6 +150,9 @@ class RummageParams:
         if self.shove_stops_from is not None and self.shove_gave_way_below is None:
             raise ValueError("shove_stops_from: ends only the shoves of "
                              "shove_gave_way_below, which is not set")
+        if self.shove_resisted_for is not None and self.shove_resisted_from is None:
+            raise ValueError("shove_resisted_for: ends only the shoves of "
+                             "shove_resisted_from, which is not set")
         if (self.flank_depth is not None and self.shove_resisted_from is None
                 and self.shove_stops_from is None):
             raise ValueError("flank_depth: flanks only what shove_resisted_from or "

@@ -97,6 +97,7 @@ class BeliefRummagingPolicy(LaneWalk):
         self._lane_rounds = 0
         self._shoved = False
         self._shove_stops_from: float | None = None  # (N) where the shove under way ends
+        self._shove_left: int | None = None  # its actions in contact before it ends
         self._flank_plan, self._flank_tries = None, 0  # the flank touch under way
         self._verified = self._stopping = False
         self.confidence, self.pose = 0.0, None
@@ -219,6 +220,10 @@ class BeliefRummagingPolicy(LaneWalk):
                 stops = self._shove_stops_from
                 if stops is not None and self._peak_force >= stops:  # NaN compares False
                     return self._end_shove(xy)
+                if self._shove_left is not None:
+                    self._shove_left -= 1
+                    if self._shove_left <= 0:
+                        return self._end_shove(xy)
                 return self._follow(xy, belief)
             if kind == "flank_ahead" and self._gave_way():  # pushed along
                 return self._follow(xy, belief)
@@ -262,12 +267,14 @@ class BeliefRummagingPolicy(LaneWalk):
             return self._press()
         back = np.array([-self.params.back_off, 0.0])
         cause = self._shove_cause(pressed)
-        if cause == "resisted" and self._flank(xy):
+        if cause == "resisted" and p.shove_resisted_for is None and self._flank(xy):
             pass  # touched on its flank first
         elif cause is not None:
             self._leave_lane(xy, from_touch=True, at_once=True)
             if cause == "gave_way":
                 self._shove_stops_from = p.shove_stops_from
+            else:
+                self._shove_left = p.shove_resisted_for
         elif self._may_probe():
             self._probe = self._new_probe()
         elif self._retouches < self.params.retouches:
@@ -287,10 +294,11 @@ class BeliefRummagingPolicy(LaneWalk):
         return self._may_probe()
 
     def _end_shove(self, xy) -> np.ndarray:
-        """A shove met what resists (``shove_stops_from``): back off, then touch its flank
-        (``flank_depth``) or assess."""
+        """A shove met what resists (``shove_stops_from``), or slid along what resisted for
+        ``shove_resisted_for`` actions: back off, then touch its flank (``flank_depth``) or
+        assess."""
         far = next(point for kind, point in self._queue if kind == "shove")
-        self._shove_stops_from, self._moving = None, False
+        self._shove_stops_from, self._shove_left, self._moving = None, None, False
         if not self._flank(xy):
             self._queue = [("assess", far)]
         return self._bounce()
@@ -344,7 +352,8 @@ class BeliefRummagingPolicy(LaneWalk):
         self._queue += [("shove", far), ("move", back), ("assess", far)]
 
     def _next_lane(self) -> None:
-        self._shoved, self._lane_rounds, self._shove_stops_from = False, 0, None
+        self._shoved, self._lane_rounds = False, 0
+        self._shove_stops_from = self._shove_left = None
         super()._next_lane()
 
     def _marker(self, kind: str, point, xy, belief) -> tuple[bool, np.ndarray | None]:
