@@ -22,15 +22,16 @@ class Unsure:
         return self
 
 
-def play_kinds(policy, pose, belief=None, force=None, contact_y=None, limit=80):
+def play_kinds(policy, pose, belief=None, force=None, contact_y=None, limit=80, late=False):
     """Plays ``policy`` against BOX at ``pose``, placed by ``belief`` (default
     :class:`Unsure`): (each action's kind, the gripper's position before it, whether it was a
     push that touched). ``force`` (N, None: not given) is each touch's peak force (0 out of
     contact), or a function of the kind of action that touched giving it; with
     ``contact_y`` (the gripper's y -> the contact's y), each contact's point is given to the
-    policy."""
+    policy, after the action (``late``: after the next one, as in the loop)."""
     belief = belief or Unsure(pose)
     xy, in_contact, kinds, positions, touches = START.copy(), False, [], [], []
+    pending = []
     for _ in range(limit):
         if force is not None:
             felt = force(kinds[-1]) if callable(force) and in_contact else force
@@ -42,8 +43,12 @@ def play_kinds(policy, pose, belief=None, force=None, contact_y=None, limit=80):
         positions.append(xy.copy())
         xy, in_contact = guarded_move(xy, step, pose)
         touches.append(in_contact and kinds[-1] == "push")
-        if in_contact and contact_y is not None:
-            policy.sensed([[xy[0] + 0.04, contact_y(xy[1]), 0.1]])
+        contact = [[xy[0] + 0.04, contact_y(xy[1]), 0.1]] if in_contact and contact_y else []
+        if late:
+            policy.sensed(pending)
+            pending = contact
+        elif contact:
+            policy.sensed(contact)
     return kinds, positions, touches
 
 
@@ -200,6 +205,21 @@ def test_a_heavy_object_met_is_touched_on_its_flank_before_anything_else():
     assert kinds[flank[-1] + 1] == "back_off"
     touch = positions[flank[-1] + 1]  # where the last flank action left the gripper
     assert touch == pytest.approx([0.211, 0.09], abs=2e-3)
+    # Contacts known an action late, the first touch's at y 0.06 (as if another object's):
+    # the flank is planned once backed off, from the press's contact, and goes as above.
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    touched = []
+
+    def first_elsewhere(y):
+        touched.append(y)
+        return 0.06 if len(touched) == 1 else overlap_middle(y)
+
+    kinds, positions, _ = play_kinds(policy, pose, force=45.0, contact_y=first_elsewhere,
+                                     late=True)
+    first = kinds.index("flank")  # the flank's first action: forward, right of the lane
+    assert positions[first] == pytest.approx([0.161, 0.08], abs=2e-3)
+    assert kinds[first:first + 4] == ["flank"] * 3 + ["back_off"]
+    assert positions[first + 3] == pytest.approx([0.211, 0.09], abs=2e-3)
     with pytest.raises(ValueError, match="neither is set"):
         RummageParams(flank_depth=0.03)
 

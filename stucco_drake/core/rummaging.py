@@ -99,6 +99,7 @@ class BeliefRummagingPolicy(LaneWalk):
         self._shove_stops_from: float | None = None  # (N) where the shove under way ends
         self._shove_left: int | None = None  # its actions in contact before it ends
         self._flank_plan, self._flank_tries = None, 0  # the flank touch under way
+        self._flank_push = np.zeros(2)  # the direction of the push that met what it flanks
         self._verified = self._stopping = False
         self.confidence, self.pose = 0.0, None
         self._peak_force = float("nan")  # the last action's (N), see felt_force
@@ -304,18 +305,30 @@ class BeliefRummagingPolicy(LaneWalk):
         return self._bounce()
 
     def _flank(self, xy) -> bool:
-        """With ``flank_depth``, queues the flank touch (:func:`~.flank.plan_flank`) of the
-        heavy object the last push met, after the back-off; False when off or not planned."""
-        p = self.params
-        if p.flank_depth is None or self._contact_xy is None:
+        """With ``flank_depth``, queues the flank touch of the heavy object the push from
+        ``xy`` met, planned after the back-off (:meth:`_plan_flank`); False when off."""
+        if self.params.flank_depth is None:
             return False
-        flank = plan_flank(xy, self._contact_xy, self._last_step, self.footprint, self.reach,
-                           depth=p.flank_depth, margin=p.flank_margin, back_off=p.back_off,
-                           centred=p.side_margin, in_workspace=self.in_workspace)  # fmt: skip
+        self._flank_push = self._last_step.copy()
+        self._queue = [("plan_flank", xy.copy())]
+        return True
+
+    def _plan_flank(self, touch_xy) -> bool:
+        """Plans the flank touch (:func:`~.flank.plan_flank`) from the push's contact, known
+        now that the gripper has backed off (an action's contacts come an action late: at the
+        push's own end the last known contact may be another object's); False when none
+        is planned."""
+        p = self.params
+        if self._contact_xy is None:
+            return False
+        flank = plan_flank(touch_xy, self._contact_xy, self._flank_push, self.footprint,
+                           self.reach, depth=p.flank_depth, margin=p.flank_margin,
+                           back_off=p.back_off, centred=p.side_margin,
+                           in_workspace=self.in_workspace)  # fmt: skip
         if flank is None:
             return False
         self._flank_plan, self._flank_tries = flank, 0
-        self._queue = self._flank_legs()
+        self._queue[:1] = self._flank_legs()
         return True
 
     def _flank_legs(self) -> list[tuple[str, np.ndarray]]:
@@ -358,11 +371,16 @@ class BeliefRummagingPolicy(LaneWalk):
 
     def _marker(self, kind: str, point, xy, belief) -> tuple[bool, np.ndarray | None]:
         """Before a touch beside, with ``probe_once_placed``, probe at once if the belief
-        places the felt object; after a shove (or a flank touch), assess."""
+        places the felt object; once backed off from a heavy object, plan its flank touch;
+        after a shove (or a flank touch), assess."""
         if kind == "retouch" and self.params.probe_once_placed and self._placed_now(belief):
             self._queue.pop(0)
             self._probe = self._new_probe()
             return True, self._decide(xy, False, belief)
+        if kind == "plan_flank":
+            if self._plan_flank(point):
+                return True, self._follow(xy, belief)
+            kind = "flanked"  # none planned: on as after one
         if kind in ("assess", "flanked"):
             self._queue.pop(0)
             return True, self._assess(xy, belief, leave=kind == "flanked")
