@@ -11,6 +11,9 @@ side of the gripper's front, its edge about as far inside the front as the conta
 the front's edge on that side (the contact is the middle of the overlap), so the flank is the
 other side, just clear of that edge. A centred contact says nothing of the object's width;
 the flank then clears the target's largest half extent on the first side the workspace allows.
+The contact the tracker gives may lie well off the overlap's middle (3 cm towards the gripper's
+edge on a box face of the development layouts), so the forward move may still meet the object;
+the policy then goes further out and tries again.
 
 Planar points (x, y) in the world frame W (m). The footprint is given as points in W axes
 about the gripper's origin (its yaw is fixed).

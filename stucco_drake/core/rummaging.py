@@ -256,9 +256,11 @@ class BeliefRummagingPolicy(LaneWalk):
     def _felt(self, xy, belief, pressed: bool = False) -> np.ndarray | None:
         """A push sensed contact: stop if the target is known, else (with
         ``shove_resisted_from`` or ``shove_gave_way_below``) press it once and push the lane
-        through if its force says so (:meth:`_shove_cause`), else probe it if the belief
-        places it (and rounds are left), else touch it again beside the first touch (see
-        ``retouches``), else leave the lane (:meth:`_leave_lane`); first back off."""
+        through if its force says so (:meth:`_shove_cause`; what resisted is touched on its
+        flank instead with ``flank_depth`` and no ``shove_resisted_for``), else probe it if
+        the belief places it (and rounds are left), else touch it again beside the first
+        touch (see ``retouches``), else leave the lane (:meth:`_leave_lane`); first back
+        off."""
         if self._known(belief):
             return None
         p = self.params
