@@ -22,6 +22,12 @@ class Unsure:
         return self
 
 
+def overlap_middle(y):
+    """The contact's y for the gripper at lane y against the box turned 90 degrees at y 0.17
+    (its long face spans y 0.14..0.20; the footprint 10 cm wide): the overlap's middle."""
+    return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
+
+
 def play_kinds(policy, pose, belief=None, force=None, contact_y=None, limit=80, late=False):
     """Plays ``policy`` against BOX at ``pose``, placed by ``belief`` (default
     :class:`Unsure`): (each action's kind, the gripper's position before it, whether it was a
@@ -60,9 +66,6 @@ def test_shove_first_pushes_an_unsure_lane_through_from_the_touch_then_probes():
     backed off 2 cm: 0.161), never going back to the lanes' start (x -0.04) on the way, and
     probes after the shove."""
     pose = np.array([0.3, 0.17, np.radians(90)])
-
-    def overlap_middle(y):
-        return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
 
     for shove_first in (False, True):
         policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START,
@@ -192,9 +195,6 @@ def test_a_heavy_object_met_is_touched_on_its_flank_before_anything_else():
     It then backs off and probes, the first shove (if any) after the probe round."""
     pose = np.array([0.3, 0.17, np.radians(90)])
 
-    def overlap_middle(y):
-        return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
-
     params = RummageParams(coverage=BAND_NEAREST, max_actions=80, press_step=0.02,
                            shove_resisted_from=20.0, flank_depth=0.03)
     policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
@@ -256,9 +256,6 @@ def test_a_shove_along_what_resisted_ends_after_its_touches_then_flanks():
     (the gripper sliding along the heavy object's face); the gripper backs off there and
     touches the object's flank, then probes. The setting needs ``shove_resisted_from``."""
     pose = np.array([0.3, 0.17, np.radians(90)])
-
-    def overlap_middle(y):
-        return (max(0.14, y - 0.05) + min(0.20, y + 0.05)) / 2
 
     params = RummageParams(coverage=BAND_NEAREST, max_actions=80, press_step=0.02,
                            shove_resisted_from=20.0, shove_resisted_for=1, flank_depth=0.03)

@@ -78,22 +78,18 @@ def plan_flank(gripper_xy, contact_xy, push, footprint, reach: float, *, depth: 
     offset = float((c - g) @ n)
     contact_across = float(g @ n) + offset
     if abs(offset) > centred:  # off-centre: the object's edge inside the gripper's front
-        sides = [-np.sign(offset)]
+        side = -float(np.sign(offset))
+        covered = float(g @ n) + edges[-side]  # the front's edge on the contact's side
+        # Between the gripper's other edge and the contact (the middle of the overlap).
+        low, high = sorted((float(g @ n) + edges[side], contact_across))
+        candidates = [(side, float(np.clip(2.0 * contact_across - covered, low, high)))]
     else:
-        sides = [1.0, -1.0]
-    for side in sides:
-        if len(sides) == 1:
-            covered = float(g @ n) + edges[-side]  # the front's edge on the contact's side
-            edge = 2.0 * contact_across - covered
-            # Between the gripper's other edge and the contact (the middle of the overlap).
-            low, high = sorted((float(g @ n) + edges[side], contact_across))
-            edge = float(np.clip(edge, low, high))
-        else:
-            edge = contact_across + side * reach
+        candidates = [(side, contact_across + side * reach) for side in (1.0, -1.0)]
+    back = float(g @ u) - back_off
+    forward = float(c @ u) + depth - float(along.max())
+    for side, edge in candidates:
         # The gripper's near side (facing the object) clear of the edge by the margin.
         across_side = edge + side * margin - edges[-side]
-        back = float(g @ u) - back_off
-        forward = float(c @ u) + depth - float(along.max())
         push_end = contact_across - side * depth - edges[-side]
         points = FlankTouch(back * u + across_side * n, forward * u + across_side * n,
                             forward * u + push_end * n, side * n)  # fmt: skip

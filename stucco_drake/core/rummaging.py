@@ -270,14 +270,12 @@ class BeliefRummagingPolicy(LaneWalk):
             return self._press()
         back = np.array([-self.params.back_off, 0.0])
         cause = self._shove_cause(pressed)
-        if cause == "resisted" and p.shove_resisted_for is None and self._flank(xy):
-            pass  # touched on its flank first
-        elif cause is not None:
-            self._leave_lane(xy, from_touch=True, at_once=True)
-            if cause == "gave_way":
-                self._shove_stops_from = p.shove_stops_from
-            else:
-                self._shove_left = p.shove_resisted_for
+        if cause is not None:
+            flank_now = cause == "resisted" and p.shove_resisted_for is None
+            if not (flank_now and self._flank(xy)):
+                self._leave_lane(xy, from_touch=True, at_once=True)
+                self._shove_stops_from = p.shove_stops_from if cause == "gave_way" else None
+                self._shove_left = p.shove_resisted_for if cause == "resisted" else None
         elif self._may_probe():
             self._probe = self._new_probe()
         elif self._retouches < self.params.retouches:
