@@ -70,3 +70,50 @@ def test_no_side_in_the_workspace_means_no_flank():
     gripper, contact = np.array([0.23, 0.10]), np.array([0.27, 0.10])
     assert plan_flank(gripper, contact, [1.0, 0.0], FOOTPRINT, REACH,
                       in_workspace=lambda xy: abs(xy[1] - 0.1) < 0.05, **SETTINGS) is None
+
+
+def outline_touched(where, pose) -> np.ndarray:
+    """The mean of BOX's outline points (1 mm apart) within 2 mm of the nearest one to the
+    footprint at where (the footprint stops short of the box by up to a move's resolution)."""
+    t = np.arange(-1.0, 1.0, 0.001)
+    hx, hy = 0.03, 0.079
+    local = np.vstack([np.column_stack([hx * np.ones_like(t), hy * t]),
+                       np.column_stack([-hx * np.ones_like(t), hy * t]),
+                       np.column_stack([hx * t, hy * np.ones_like(t)]),
+                       np.column_stack([hx * t, -hy * np.ones_like(t)])])  # fmt: skip
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    outline = local @ np.array([[c, s], [-s, c]]) + pose[:2]
+    gap = np.linalg.norm(np.maximum(np.abs(outline - where) - [0.04, 0.05], 0.0), axis=1)
+    return outline[gap <= gap.min() + 0.002].mean(axis=0)
+
+
+@pytest.mark.parametrize(("ahead", "past_corner"), [(0.0, (0.0, 0.005)), (0.05, (0.015, 0.04))])
+def test_retries_that_also_go_ahead_reach_past_a_slanted_end_face(ahead, past_corner):
+    """The box 28.5 degrees from end-on, its 6 cm end face slanting away to the left (its far
+    corner 2.9 cm further along x than its near one): the gripper's push along +x meets the
+    end face's near corner, and the flank's first forward move (left, +y) meets the end face
+    again, further along. Going only further out on the retry (``ahead`` 0), the gripper's
+    side spans the far corner and the sideways push back meets the box there, where the end
+    face and the long face explain a touch alike; going 5 cm further ahead too, the gripper's
+    rear end passes the corner and the push meets the long face 1.5-4 cm past it (distances
+    along the long face, against the box's outline)."""
+    pose = np.array([0.262, 0.055, np.radians(61.5)])
+    start = np.array([0.0, 0.104])
+    gripper, touched, _ = first_touch(start, np.array([0.3, 0.104]), pose)
+    assert touched
+    flank = plan_flank(gripper, outline_touched(gripper, pose), [1.0, 0.0], FOOTPRINT, REACH,
+                       depth=0.08, margin=0.01, back_off=0.02)  # fmt: skip
+    retries = 0
+    while True:
+        where, touched, _ = first_touch(flank.side, flank.past, pose)
+        if not touched or retries == 2:
+            break
+        flank, retries = flank.further(0.03, ahead), retries + 1
+    assert (touched, retries) == (False, 1)
+    where, touched, _ = first_touch(flank.past, flank.push_end, pose)
+    assert touched
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    local = (outline_touched(where, pose) - pose[:2]) @ np.array([[c, -s], [s, c]])
+    # On the +x long face (local x 0.03), its distance from the far corner (local y 0.079).
+    assert local[0] == pytest.approx(0.03, abs=0.003)
+    assert past_corner[0] <= 0.079 - local[1] <= past_corner[1]

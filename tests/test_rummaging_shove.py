@@ -230,13 +230,14 @@ def test_a_flank_that_meets_the_object_going_forward_goes_further_out():
     front's left part (edge 0.10): the flank's first forward move (y 0.04) meets its face
     again at 45 N, and so does the next, 3 cm further out. With ``flank_retries`` 3 the
     third retry (y -0.05) passes, and the push back meets the -y end face (y 0.021, the
-    footprint's left side at y -0.029); with 1 retry the policy gives up after it and asks
-    the belief."""
+    footprint's left side at y -0.029), the gripper's front 3 cm past the face (x 0.30), or
+    with ``flank_step_ahead`` 1 cm, 3 cm further forward (x 0.33, the box's far corner);
+    with 1 retry the policy gives up after it and asks the belief."""
     pose = np.array([0.30, 0.10, 0.0])
-    for retries in (1, 3):
+    for retries, ahead in ((1, 0.0), (3, 0.0), (3, 0.01)):
         params = RummageParams(coverage=BAND_NEAREST, max_actions=80, press_step=0.02,
                                shove_resisted_from=20.0, flank_depth=0.03,
-                               flank_retries=retries)  # fmt: skip
+                               flank_retries=retries, flank_step_ahead=ahead)  # fmt: skip
         policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
         kinds, positions, _ = play_kinds(policy, pose, force=45.0, contact_y=lambda y: 0.125)
         flank = [i for i, kind in enumerate(kinds) if kind == "flank"]
@@ -244,7 +245,7 @@ def test_a_flank_that_meets_the_object_going_forward_goes_further_out():
         assert kinds[flank[-1] + 1] == "back_off" and "probe" in kinds[flank[-1]:]
         if retries == 3:
             assert last[1] + 0.05 == pytest.approx(0.021, abs=2e-3)
-            assert last[0] + 0.04 == pytest.approx(0.30, abs=2e-3)  # 3 cm past the face
+            assert last[0] + 0.04 == pytest.approx(0.30 + 3 * ahead, abs=2e-3)
         else:  # stopped at the front face (x 0.27) on the second retry's way forward
             assert last[0] + 0.04 == pytest.approx(0.27, abs=2e-3)
             assert last[1] == pytest.approx(0.01, abs=2e-3)

@@ -33,17 +33,21 @@ class FlankTouch:
     distance, ``past`` the forward move beside the object, ``push_end`` where the sideways
     push towards the touch ends (the gripper's near edge ``depth`` past the contact);
     ``away`` the unit vector across the push pointing away from the object (the way to go
-    further out when the forward move meets the object still)."""
+    further out when the forward move meets the object still), ``ahead`` the push's unit
+    direction."""
 
     side: np.ndarray
     past: np.ndarray
     push_end: np.ndarray
     away: np.ndarray
+    ahead: np.ndarray
 
-    def further(self, distance: float) -> FlankTouch:
-        """The same touch with its sideways and forward moves ``distance`` further out."""
-        shift = distance * self.away
-        return FlankTouch(self.side + shift, self.past + shift, self.push_end, self.away)
+    def further(self, distance: float, ahead: float = 0.0) -> FlankTouch:
+        """The same touch with its sideways and forward moves ``distance`` further out, and
+        its forward move and sideways push ``ahead`` further forward (m)."""
+        out, forward = distance * self.away, ahead * self.ahead
+        return FlankTouch(self.side + out, self.past + out + forward, self.push_end + forward,
+                          self.away, self.ahead)  # fmt: skip
 
 
 def plan_flank(gripper_xy, contact_xy, push, footprint, reach: float, *, depth: float,
@@ -92,7 +96,7 @@ def plan_flank(gripper_xy, contact_xy, push, footprint, reach: float, *, depth: 
         across_side = edge + side * margin - edges[-side]
         push_end = contact_across - side * depth - edges[-side]
         points = FlankTouch(back * u + across_side * n, forward * u + across_side * n,
-                            forward * u + push_end * n, side * n)  # fmt: skip
+                            forward * u + push_end * n, side * n, u)  # fmt: skip
         if all(in_workspace(p) for p in (points.side, points.past)):
             return points
     return None

@@ -95,12 +95,15 @@ class RummageParams:
             box touched on one face only can be read a quarter turn wrong; the face beside
             it tells. What the forward move meets is pushed along if it gives way
             (``shove_gave_way_below``: it is not the target), else the gripper backs off and
-            goes ``flank_step`` further out, ``flank_retries`` times (the object reached
-            further than its contact said). Then the belief is asked (probed if it places the
+            goes ``flank_step`` further out and ``flank_step_ahead`` further forward,
+            ``flank_retries`` times (the object reached further than its contact said; a face
+            met again further out slants away from the push, and the face beside it begins
+            further ahead). Then the belief is asked (probed if it places the
             target), else the lane is left as after a touch.
         flank_margin: how far clear of the object's estimated edge the flank's forward move
             passes (m).
-        flank_step: see ``flank_depth``.
+        flank_step: see ``flank_depth`` (m).
+        flank_step_ahead: see ``flank_depth`` (m).
         flank_retries: see ``flank_depth``.
         probe_once_placed: before each touch beside, once the touch before has been backed
             off from and its contacts are known, ask the belief again and probe at once if it
@@ -139,6 +142,7 @@ class RummageParams:
     flank_depth: float | None = None
     flank_margin: float = 0.01
     flank_step: float = 0.03
+    flank_step_ahead: float = 0.0
     flank_retries: int = 2
     probe_once_placed: bool = False
     check_each_probe: bool = False

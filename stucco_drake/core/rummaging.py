@@ -339,10 +339,12 @@ class BeliefRummagingPolicy(LaneWalk):
     def _flank_touched(self, kind: str) -> np.ndarray:
         """The flank touch met something it did not push along: back off, then ask the
         belief; or, met while going forward (the object reaches further out than the plan
-        said), go ``flank_step`` further out and try again (``flank_retries`` times)."""
-        if kind == "flank_ahead" and self._flank_tries < self.params.flank_retries:
+        said), go ``flank_step`` further out and ``flank_step_ahead`` further forward and try
+        again (``flank_retries`` times)."""
+        p = self.params
+        if kind == "flank_ahead" and self._flank_tries < p.flank_retries:
             self._flank_tries += 1
-            self._flank_plan = self._flank_plan.further(self.params.flank_step)
+            self._flank_plan = self._flank_plan.further(p.flank_step, p.flank_step_ahead)
             self._queue = self._flank_legs()
         else:
             self._queue = [("flanked", self._flank_plan.push_end)]
