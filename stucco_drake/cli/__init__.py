@@ -21,6 +21,7 @@ from stucco_drake.cli.estimates import add_estimates_command
 from stucco_drake.cli.scenes import add_scenes_command
 from stucco_drake.cli.sweep import add_sweep_command
 from stucco_drake.core.inputs import InputError, non_negative_int
+from stucco_drake.eval.cli_policies import add_policies_command
 from stucco_drake.eval.cli_summary import add_summary_command
 from stucco_drake.eval.cli_table import add_table_command
 from stucco_drake.eval.sources import SYNTHETIC_SOURCES
@@ -91,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_diagram_command(commands)
     add_sweep_command(commands)
     add_summary_command(commands)
+    add_policies_command(commands)
     return parser
 
 

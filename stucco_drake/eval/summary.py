@@ -130,14 +130,16 @@ def _grasps(rows, family, method) -> dict[tuple[str, int], bool]:
             and r["grasp_success"] is not None}  # fmt: skip
 
 
-def _count(successes: int, runs: int) -> str:
+def count_text(successes: int, runs: int) -> str:
+    """``successes``/``runs`` (%, Wilson 95 % interval), or n/a for no runs."""
     if runs == 0:
         return "n/a"
     low, high = wilson_interval(successes, runs)
     return f"{successes}/{runs} ({100 * successes / runs:.0f} %, {100 * low:.0f}-{100 * high:.0f})"
 
 
-def _markdown(header: Sequence[str], lines: Sequence[Sequence[str]]) -> list[str]:
+def markdown_lines(header: Sequence[str], lines: Sequence[Sequence[str]]) -> list[str]:
+    """A Markdown table's lines."""
     return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
             *("| " + " | ".join(line) + " |" for line in lines)]
 
@@ -150,7 +152,7 @@ def grasp_lines(rows, families, methods) -> list[str]:
         line = [METHOD_LABELS.get(method, method)]
         for family in families:
             grasped = _grasps(rows, family, method)
-            line.append(_count(sum(grasped.values()), len(grasped)))
+            line.append(count_text(sum(grasped.values()), len(grasped)))
         for family in families:
             ce = np.array([r["ce_cm"] for r in rows
                            if r["family"] == family and r["method"] == method])
@@ -160,7 +162,7 @@ def grasp_lines(rows, families, methods) -> list[str]:
         table.append(line)
     header = ["method", *(f"{f} GS" for f in families), *(f"{f} CE cm" for f in families)]
     return ["Grasp success: grasped/runs (%, 95 % Wilson interval); contact error: mean (sd).",
-            "", *_markdown(header, table)]
+            "", *markdown_lines(header, table)]
 
 
 def paired_lines(rows, families, reference, methods) -> list[str]:
@@ -180,7 +182,8 @@ def paired_lines(rows, families, reference, methods) -> list[str]:
         table.append(line)
     name = METHOD_LABELS.get(reference, reference)
     return [f"Paired with {name}, layout by layout: W/L = grasped by {name} only / by the "
-            "other only; p: McNemar's exact test.", "", *_markdown(["method", *families], table)]
+            "other only; p: McNemar's exact test.", "",
+            *markdown_lines(["method", *families], table)]
 
 
 def calibration_lines(estimates, families, threshold: float = CONFIDENT_FROM) -> list[str]:
@@ -191,12 +194,12 @@ def calibration_lines(estimates, families, threshold: float = CONFIDENT_FROM) ->
         group = [e for e in estimates if family in ("all", e["family"])]
         sure = [e for e in group if e["confidence"] >= threshold]
         rest = [e for e in group if e["confidence"] < threshold]
-        table.append([family, _count(sum(bool(e["grasp_success"]) for e in sure), len(sure)),
+        table.append([family, count_text(sum(bool(e["grasp_success"]) for e in sure), len(sure)),
                       f"{len(rest)}", f"{sum(e['target_contacts'] > 0 for e in rest)}",
                       f"{sum(bool(e['grasp_success']) for e in rest)}"])
     header = ["family", f"confident (>= {threshold:g}): grasped/runs", "others",
               "others, target touched", "others, grasped"]
-    return ["Calibration of the target confidence.", "", *_markdown(header, table)]
+    return ["Calibration of the target confidence.", "", *markdown_lines(header, table)]
 
 
 def against_lines(rows, other_rows, families, method) -> list[str]:
@@ -208,9 +211,9 @@ def against_lines(rows, other_rows, families, method) -> list[str]:
         if not here or not there:
             continue
         k1, n1, k2, n2 = sum(here.values()), len(here), sum(there.values()), len(there)
-        table.append([family, _count(k1, n1), _count(k2, n2),
+        table.append([family, count_text(k1, n1), count_text(k2, n2),
                       f"{100 * (k1 / n1 - k2 / n2):+.0f}", f"{fisher_p(k1, n1, k2, n2):.2f}"])
     name = METHOD_LABELS.get(method, method)
     return [f"{name} on these layouts and on --against's: the difference in points and "
             "Fisher's exact p.", "",
-            *_markdown(["family", "here", "--against", "points", "Fisher p"], table)]
+            *markdown_lines(["family", "here", "--against", "points", "Fisher p"], table)]
