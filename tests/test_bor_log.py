@@ -187,3 +187,24 @@ def test_planar_surface_turns_an_offset_shape():
     np.testing.assert_allclose(surface(np.array([[1.0, 0.1, 0.0], [1.1, 0.1, 0.0],
                                                  [1.0, 0.12, 0.0]])),
                                [-0.01, 0.0, 0.01], atol=1e-12)  # fmt: skip
+
+
+def test_the_log_says_whether_the_push_limit_could_slide_the_target(fb_log):
+    """FB's target is the 10 kg cracker box (``models/ycb/003_cracker_box_10kg.sdf``: friction
+    0.5) under the scene's 30 N push limit: 49 N to slide, so with ``still_when_unslidable``
+    its replays search only scale 0, as its live estimator did."""
+    import dataclasses
+
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+    from stucco_drake.core.motion_scale import MOTION_SCALES
+    from stucco_drake.eval.target_estimates import log_motion_scales
+
+    assert fb_log.info["target_slide"] == {"mass": 10.0, "friction": 0.5, "max_push_force": 30.0}
+    still = HypothesisParams(still_when_unslidable=True)
+    assert log_motion_scales(fb_log, still) == (0.0,)
+    assert log_motion_scales(fb_log) == MOTION_SCALES
+    older = dataclasses.replace(fb_log, info={k: v for k, v in fb_log.info.items()
+                                              if k != "target_slide"})  # fmt: skip
+    assert log_motion_scales(older) == MOTION_SCALES
+    with pytest.raises(ValueError, match="predates"):
+        log_motion_scales(older, still)

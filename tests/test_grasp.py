@@ -105,3 +105,20 @@ def test_fb_slide_stopped_by_the_box_tries_the_next_approach():
     alone = _grasp("FB", CRACKER_BOX, approach_offsets=[beside])
     assert alone.attempts == 1
     assert not alone.success, alone.reason
+
+
+def test_only_a_target_the_push_limit_cannot_slide_is_held_still():
+    """By the models' masses and friction (``models/ycb``) and the scenes' 30 N push limit: BC's
+    10 kg box needs 0.5 * 10 * 9.81 = 49 N to slide, TC's 2 kg can 9.8 N."""
+    from stucco_drake.bor.diagram import build_bor_diagram, target_motion_scales, target_slide
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+    from stucco_drake.core.motion_scale import MOTION_SCALES
+
+    still = HypothesisParams(still_when_unslidable=True)
+    box, can = (build_grasp_scene(load_scene(name)) for name in ("BC", "TC"))
+    assert target_slide(can) == {"mass": 2.0, "friction": 0.5, "max_push_force": 30.0}
+    assert target_motion_scales(box, still) == (0.0,)
+    assert target_motion_scales(can, still) == MOTION_SCALES
+    assert target_motion_scales(box) == MOTION_SCALES
+    live = build_bor_diagram(load_scene("BC"), "stucco", 0, hypothesis_params=still)
+    assert live.target_estimator.motion_scales == (0.0,)

@@ -10,7 +10,12 @@ import pytest
 from stucco_drake.core.free_space import FreeSpace
 from stucco_drake.core.hypothesis_params import HypothesisParams
 from stucco_drake.core.icp import rotations
-from stucco_drake.core.motion_scale import motion_scaled_hypotheses
+from stucco_drake.core.motion_scale import (
+    GRAVITY,
+    MOTION_SCALES,
+    motion_scaled_hypotheses,
+    scales_under_push_limit,
+)
 from stucco_drake.core.pose_hypotheses import pose_hypotheses
 from stucco_drake.core.shapes import BoxSdf
 
@@ -133,3 +138,17 @@ def test_bad_scales_or_shapes_are_one_line_errors():
                                  scales=(0.0, 1.5))  # fmt: skip
     with pytest.raises(ValueError, match="tracked"):
         motion_scaled_hypotheses(np.random.default_rng(0), points, points[:3], labels, BOX)
+
+
+def test_a_target_the_push_limit_cannot_slide_is_searched_where_sensed():
+    # Sliding needs mu m g: 0.5 * 10 kg * 9.81 m/s^2 = 49 N against a 30 N push (the paper's
+    # cap): only scale 0. A 2 kg can needs 9.8 N: every scale. So does any target unlimited.
+    assert scales_under_push_limit(10.0, 0.5, 30.0) == (0.0,)
+    assert scales_under_push_limit(2.0, 0.5, 30.0) == MOTION_SCALES
+    assert scales_under_push_limit(10.0, 0.5, None) == MOTION_SCALES
+    # The boundary: 30 N slides exactly 30 / (0.5 * 9.81) = 6.116 kg; 1 g either side.
+    limit = 30.0 / (0.5 * GRAVITY)
+    assert scales_under_push_limit(limit + 1e-3, 0.5, 30.0) == (0.0,)
+    assert scales_under_push_limit(limit - 1e-3, 0.5, 30.0) == MOTION_SCALES
+    with pytest.raises(ValueError, match="mass"):
+        scales_under_push_limit(0.0, 0.5, 30.0)

@@ -29,6 +29,7 @@ from stucco_drake.bor.grasp import build_grasp_scene
 from stucco_drake.bor.policies import PolicySettings, add_policy
 from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.hypothesis_params import HypothesisParams
+from stucco_drake.core.motion_scale import MOTION_SCALES, scales_under_push_limit
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.robot.gripper_sdf import gripper_penetration
@@ -131,6 +132,29 @@ def target_shape(built: BuiltScene) -> BoxSdf | CylinderSdf:
     if not np.allclose(X_BG.rotation().matrix(), np.eye(3), atol=1e-9):
         raise ValueError(f"target {built.scene.target!r}: its box is rotated in its body frame")
     return BoxSdf(sdf.half_extents, tuple(map(float, X_BG.translation())))
+
+
+def target_slide(built: BuiltScene) -> dict:
+    """What decides whether the gripper can slide ``built``'s target: its ``mass`` (kg), the
+    lowest dynamic ``friction`` coefficient of its collision geometries, and the scene's push
+    limit ``max_push_force`` (N, ``control.max_push_force``; None: none). The arguments of
+    :func:`~stucco_drake.core.motion_scale.scales_under_push_limit`; episode logs keep them."""
+    body = built.free_bodies[built.scene.target]
+    inspector = built.scene_graph.model_inspector()
+    friction = min(inspector.GetProximityProperties(gid).GetProperty(
+        "material", "coulomb_friction").dynamic_friction()
+        for gid in built.plant.GetCollisionGeometriesForBody(body))  # fmt: skip
+    return {"mass": float(body.default_mass()), "friction": float(friction),
+            "max_push_force": built.scene.control.max_push_force}
+
+
+def target_motion_scales(built: BuiltScene, params: HypothesisParams | None = None) -> tuple:
+    """The motion scales the target's pose hypotheses search in ``built``'s scene: every one,
+    or with ``params.still_when_unslidable`` only 0 when the push limit cannot slide the
+    target (:func:`target_slide`)."""
+    if not (params or HypothesisParams()).still_when_unslidable:
+        return tuple(MOTION_SCALES)
+    return scales_under_push_limit(**target_slide(built))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -267,6 +291,7 @@ def build_bor_diagram(
         tactile=_tactile(built, sub, noise.bubble_point_std, bubble_seed),
         truth=truth, truth_state=sub.GetOutputPort("plant_state"), dx_model=dx_model,
         hypothesis_params=hypothesis_params,
+        motion_scales=target_motion_scales(built, hypothesis_params),
     )  # fmt: skip
     tracking, target, assembler = chain.tracking, chain.target_estimator, chain.assembler
     chooser = None if policy is None else add_policy(builder, sub, built, chain, policy,

@@ -29,6 +29,7 @@ from stucco_drake.bor.diagram import (
     collision_shapes,
     object_surfaces,
     target_shape,
+    target_slide,
 )
 from stucco_drake.bor.episode import make_bor_simulator, run_episode
 from stucco_drake.bor.grasp import build_grasp_scene, estimate_clutter, grasp_at_pose
@@ -40,7 +41,11 @@ from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
 from stucco_drake.eval.sets import PAPER_SCENES
 from stucco_drake.eval.sources import EpisodeSource
-from stucco_drake.eval.target_estimates import hypotheses_estimate, rules_estimate
+from stucco_drake.eval.target_estimates import (
+    hypotheses_estimate,
+    log_motion_scales,
+    rules_estimate,
+)
 from stucco_drake.robot.gripper_samples import sample_gripper_surface
 from stucco_drake.robot.gripper_sdf import gripper_penetration
 from stucco_drake.runtime import kernels
@@ -244,6 +249,7 @@ def record_episode(
         "wall_time_s": float(result.wall_time_s),
         "kernels": kernels.status(),  # "pinned": the same log on any machine (runtime/kernels.py)
         "live": {"method": method, "ce_cm": float(result.ce_cm), "fmi": float(result.fmi)},
+        "target_slide": target_slide(bor.scene),  # replays judge whether the target could slide
     }
     if bor.policy is not None:
         info["policy"] = policy_info(bor.policy, bor.policy.GetMyContextFromRoot(
@@ -299,7 +305,7 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
         approach = "top"
     elif estimator == "hypotheses":
         found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log),
-                                    hypothesis_params)
+                                    hypothesis_params, log_motion_scales(log, hypothesis_params))
         if found is None:
             return None
         pose, clutter = found.pose, found.unexplained_points(log.contact_points, points)

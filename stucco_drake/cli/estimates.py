@@ -211,18 +211,34 @@ def _cut_summary(rows: list[dict], confident_from: float | None = None) -> str:
     return "\n".join(lines)
 
 
-def _motion_scales(given) -> tuple[tuple[float, ...], str]:
-    """The motion scales to search and the output name's suffix for them ("" for the
-    estimator's own); InputError for a scale outside [0, 1]."""
-    from stucco_drake.core.motion_scale import MOTION_SCALES, checked_scales
+def _motion_scales(given) -> tuple[tuple[float, ...] | None, str]:
+    """The motion scales to search and the output name's suffix for them (None and "" for
+    the estimator's own, each log's as its episode's estimator searched them); InputError for
+    a scale outside [0, 1]."""
+    from stucco_drake.core.motion_scale import checked_scales
 
     if given is None:
-        return tuple(MOTION_SCALES), ""
+        return None, ""
     try:
         checked_scales(given)
     except ValueError as error:
         raise InputError(f"--motion-scales: {error}") from None
     return tuple(given), "_scales_" + "_".join(f"{s:g}" for s in given)
+
+
+def _check_slides_logged(paths, hypothesis_params) -> None:
+    """InputError unless every log says what the estimator needs to search its motion scales
+    (with ``still_when_unslidable``, the target's mass and friction and the push limit)."""
+    from stucco_drake.eval.episode_log import EpisodeLog
+    from stucco_drake.eval.target_estimates import log_motion_scales
+
+    if not hypothesis_params.still_when_unslidable:
+        return
+    for path in paths:
+        try:
+            log_motion_scales(EpisodeLog.load(path), hypothesis_params)
+        except ValueError as error:
+            raise InputError(f"--hypothesis-params: {error}") from None
 
 
 def score_log(path: Path, method: str, params, dx_model: str, stream: int, scales,
@@ -240,13 +256,16 @@ def score_log(path: Path, method: str, params, dx_model: str, stream: int, scale
     from stucco_drake.eval.episode_log import EpisodeLog
     from stucco_drake.eval.replay import replay
     from stucco_drake.eval.summary import layout_family
-    from stucco_drake.eval.target_estimates import score_estimates
+    from stucco_drake.eval.target_estimates import log_motion_scales, score_estimates
 
     log = EpisodeLog.load(path)
     penetration = bor_log.log_penetration(log)
     base = layout_family(log.scene)
     cuts = [k for k in after if k <= log.n_actions] if after else [None]
     scored = []
+
+    if scales is None:
+        scales = log_motion_scales(log, hypothesis_params)
 
     def score(replayed, tracker):
         scored.append(score_estimates(replayed, tracker, penetration, hypothesis_params,
@@ -293,6 +312,8 @@ def run_estimates(args: argparse.Namespace) -> int:
     paths = sorted((out / "logs").glob("*.npz"))
     if not paths:
         raise InputError(f"--table {out}: no episode logs in {out / 'logs'}")
+    if scales is None and hypothesis_params is not None:
+        _check_slides_logged(paths, hypothesis_params)
     after = _action_counts(args.after_actions, paths)
     if after:
         suffix += "_after_" + "_".join(str(k) for k in after)

@@ -66,6 +66,10 @@ class HypothesisParams:
             clutter felt, then sliding along the box to the grasp point (straight down, then
             the other end, when a descent or a slide is blocked:
             :mod:`~stucco_drake.core.box_approach`).
+        still_when_unslidable: search only motion scale 0 (the points where sensed) when
+            the gripper's push limit cannot slide the target, by its mass and friction
+            (:func:`~stucco_drake.core.motion_scale.scales_under_push_limit`); False (the
+            default): every scale.
     """
 
     contact_noise: float = 0.004
@@ -90,6 +94,7 @@ class HypothesisParams:
     grasp_margin: float = 0.01
     grasp_angle_margin: float = np.radians(5.0)
     box_approach: str = "top"
+    still_when_unslidable: bool = False
 
     def __post_init__(self):
         check_box_approach(self.box_approach)

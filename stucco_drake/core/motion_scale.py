@@ -42,6 +42,28 @@ from stucco_drake.core.validation import as_finite_array
 #: Motion scales searched: from "never moved" to "moved as tracked", in quarters.
 MOTION_SCALES = (0.0, 0.25, 0.5, 0.75, 1.0)
 
+#: Standard gravity (m/s^2).
+GRAVITY = 9.81
+
+
+def scales_under_push_limit(mass: float, friction: float, max_push_force: float | None,
+                            scales=MOTION_SCALES) -> tuple[float, ...]:  # fmt: skip
+    """The motion scales worth searching for a target of ``mass`` (kg) that slides on the
+    table with Coulomb ``friction`` (dimensionless), pushed with at most ``max_push_force``
+    (N, in the table plane; None: no limit).
+
+    ``(0.0,)`` when the push cannot overcome the target's sliding friction,
+    ``friction * mass * g > max_push_force``: it cannot have slid, so the tracker's motion of
+    its points is the gripper's slide along it, not the target's. ``scales`` otherwise. A push
+    off the target's centre can still turn it (a rotation needs less force than a slide); that
+    turn is left to the hypotheses' noise.
+    """
+    if not (mass > 0 and friction >= 0):
+        raise ValueError(f"mass, friction: expected > 0 kg and >= 0, got {mass!r}, {friction!r}")
+    if max_push_force is not None and friction * mass * GRAVITY > max_push_force:
+        return (0.0,)
+    return tuple(float(s) for s in checked_scales(scales))
+
 
 def checked_scales(scales) -> np.ndarray:
     """``scales`` as a (k,) float array; ValueError unless at least one, each in [0, 1]."""
@@ -103,4 +125,4 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
     return dataclasses.replace(found, felt=felt[:, :2])
 
 
-__all__ = ["MOTION_SCALES", "motion_scaled_hypotheses"]
+__all__ = ["GRAVITY", "MOTION_SCALES", "motion_scaled_hypotheses", "scales_under_push_limit"]

@@ -15,7 +15,11 @@ import numpy as np
 from stucco_drake.core.free_space import FreeSpace
 from stucco_drake.core.grasp_choice import grasp_at, grasp_closes
 from stucco_drake.core.icp import cross_section_sdf, rotations, sample_outline, transform
-from stucco_drake.core.motion_scale import MOTION_SCALES, motion_scaled_hypotheses
+from stucco_drake.core.motion_scale import (
+    MOTION_SCALES,
+    motion_scaled_hypotheses,
+    scales_under_push_limit,
+)
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.pose_hypotheses import (
     HypothesisParams,
@@ -40,6 +44,21 @@ def log_target_shape(log: EpisodeLog) -> BoxSdf | CylinderSdf:
 def point_steps(log: EpisodeLog) -> np.ndarray:
     """(n,) the action (index into ``log.ee_position``) at which each contact was sensed."""
     return np.repeat(np.arange(log.n_actions), np.diff(log.contact_offsets))
+
+
+def log_motion_scales(log: EpisodeLog, params: HypothesisParams | None = None) -> tuple:
+    """The motion scales the hypotheses search on ``log``, as its episode's estimator did:
+    every one, or with ``params.still_when_unslidable`` only 0 when the push limit could not
+    slide the target (its ``info["target_slide"]``,
+    :func:`~stucco_drake.core.motion_scale.scales_under_push_limit`). ValueError for a log
+    recorded without it."""
+    if not (params or HypothesisParams()).still_when_unslidable:
+        return tuple(MOTION_SCALES)
+    slide = log.info.get("target_slide")
+    if slide is None:
+        raise ValueError(f"{log.scene} seed {log.seed}: still_when_unslidable needs the "
+                         "target's mass and friction, which this log predates")
+    return scales_under_push_limit(**slide)
 
 
 def rules_estimate(rng, log: EpisodeLog, tracker, shape,

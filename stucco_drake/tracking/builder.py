@@ -31,6 +31,7 @@ from pydrake.systems.framework import DiagramBuilder, OutputPort
 from pydrake.systems.primitives import MatrixGain
 
 from stucco_drake.core.hypothesis_params import HypothesisParams
+from stucco_drake.core.motion_scale import MOTION_SCALES
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.systems.action_contacts_assembler import ActionContactsAssembler
@@ -110,6 +111,7 @@ def add_contact_tracking(
     truth_state: OutputPort | None = None,
     dx_model: str = "ee",
     hypothesis_params: HypothesisParams | None = None,
+    motion_scales=MOTION_SCALES,
 ) -> ContactTracking:
     """Adds the contact-tracking chain to ``builder``; returns its systems and outputs.
 
@@ -142,6 +144,8 @@ def add_contact_tracking(
             and dimensionless costs, see
             :class:`~stucco_drake.core.hypothesis_params.HypothesisParams`; None: its
             defaults).
+        motion_scales: the motion scales those hypotheses search (see
+            :class:`~stucco_drake.systems.target_pose_estimator.TargetPoseEstimator`).
     """
     _check_arguments(penetration, truth, truth_state)
     h = float(time_step)
@@ -154,7 +158,7 @@ def add_contact_tracking(
     assembler = _add_assembler(builder, h, detector, isolator, pose, truth, truth_state)
     tracking, target = _add_tracking(builder, h, assembler, tracker, tracker_seed, penetration,
                                      target_shape, icp_seed, dx_model,
-                                     hypothesis_params)  # fmt: skip
+                                     hypothesis_params, motion_scales)  # fmt: skip
     chain = ContactTracking(estimator, detector, pose, bubbles, isolator, assembler, tracking,
                             target, {})  # fmt: skip
     chain.outputs = {name: getattr(chain, system).GetOutputPort(name) for system, name in OUTPUTS}
@@ -220,13 +224,15 @@ def _add_isolator(builder, h, cpf_seed, isolator_kwargs, estimator, pose, detect
 
 
 def _add_tracking(builder, h, assembler, tracker, tracker_seed, penetration, target_shape,
-                  icp_seed, dx_model, hypothesis_params=None):  # fmt: skip
+                  icp_seed, dx_model, hypothesis_params=None,
+                  motion_scales=MOTION_SCALES):  # fmt: skip
     tracking = builder.AddNamedSystem("soft_tracking", SoftTrackingFilter(
         tracker, tracker_seed, h, dx_model=dx_model, robot_sdf=penetration.robot_sdf))
     for name in ("ee_pose", "action_contacts"):
         builder.Connect(assembler.GetOutputPort(name), tracking.GetInputPort(name))
     target = builder.AddNamedSystem("target_pose_estimator", TargetPoseEstimator(
-        target_shape, penetration, icp_seed, h, hypothesis_params=hypothesis_params))
+        target_shape, penetration, icp_seed, h, hypothesis_params=hypothesis_params,
+        motion_scales=motion_scales))
     builder.Connect(assembler.GetOutputPort("ee_pose"), target.GetInputPort("ee_pose"))
     for name in ("map_points", "segment_labels", "tracked_action", "point_spread"):
         builder.Connect(tracking.GetOutputPort(name), target.GetInputPort(name))
