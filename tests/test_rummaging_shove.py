@@ -267,3 +267,21 @@ def test_a_shove_along_what_resisted_ends_after_its_touches_then_flanks():
     assert kinds[:probe].count("shove") == 1 and kinds[shove + 1] == "back_off"
     with pytest.raises(ValueError, match="shove_resisted_from, which is not set"):
         RummageParams(shove_resisted_for=3)
+
+
+def test_the_face_the_flank_met_is_touched_again_further_forward():
+    """The flank of the test above meets the box's -y long face (y 0.14) with the gripper's
+    front at x 0.251, 3 cm past the near end face (x 0.221). With ``flank_again_ahead`` 5 cm
+    it backs off, goes 5 cm further forward beside the face and pushes into it again: the
+    gripper stops at x 0.261 (front 0.301, 8 cm along the 15.8 cm face), y 0.09 as before.
+    Once only, then it probes."""
+    pose = np.array([0.3, 0.17, np.radians(90)])
+    params = RummageParams(coverage=BAND_NEAREST, max_actions=80, press_step=0.02,
+                           shove_resisted_from=20.0, flank_depth=0.03, flank_again_ahead=0.05)
+    policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+    kinds, positions, _ = play_kinds(policy, pose, force=45.0, contact_y=overlap_middle)
+    flank = [i for i, kind in enumerate(kinds) if kind == "flank"]
+    ends = [i for i in flank if kinds[i + 1] == "back_off"]  # each touch's last action
+    assert len(ends) == 2 and flank[-1] < kinds.index("probe")
+    assert positions[ends[0] + 1] == pytest.approx([0.211, 0.09], abs=2e-3)
+    assert positions[ends[1] + 1] == pytest.approx([0.261, 0.09], abs=2e-3)

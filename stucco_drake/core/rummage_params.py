@@ -105,6 +105,10 @@ class RummageParams:
         flank_step: see ``flank_depth`` (m).
         flank_step_ahead: see ``flank_depth`` (m).
         flank_retries: see ``flank_depth``.
+        flank_again_ahead: None (off) or a distance (m). Once the flank's sideways push has
+            met the face beside, touch that face once more this far further forward: forward
+            beside it, then sideways towards it again, guarded. A face touched only near its
+            corner fits a box a quarter turn away as well; further along, only the right one.
         probe_once_placed: before each touch beside, once the touch before has been backed
             off from and its contacts are known, ask the belief again and probe at once if it
             places the felt object, instead of touching beside first (the decision at the
@@ -144,6 +148,7 @@ class RummageParams:
     flank_step: float = 0.03
     flank_step_ahead: float = 0.0
     flank_retries: int = 2
+    flank_again_ahead: float | None = None
     probe_once_placed: bool = False
     check_each_probe: bool = False
 

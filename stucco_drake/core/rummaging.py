@@ -99,6 +99,7 @@ class BeliefRummagingPolicy(LaneWalk):
         self._shove_stops_from: float | None = None  # (N) where the shove under way ends
         self._shove_left: int | None = None  # its actions in contact before it ends
         self._flank_plan, self._flank_tries = None, 0  # the flank touch under way
+        self._flank_again = False  # its second touch further along the face is under way
         self._flank_push = np.zeros(2)  # the direction of the push that met what it flanks
         self._verified = self._stopping = False
         self.confidence, self.pose = 0.0, None
@@ -327,7 +328,7 @@ class BeliefRummagingPolicy(LaneWalk):
                            in_workspace=self.in_workspace)  # fmt: skip
         if flank is None:
             return False
-        self._flank_plan, self._flank_tries = flank, 0
+        self._flank_plan, self._flank_tries, self._flank_again = flank, 0, False
         self._queue[:1] = self._flank_legs()
         return True
 
@@ -340,15 +341,30 @@ class BeliefRummagingPolicy(LaneWalk):
         """The flank touch met something it did not push along: back off, then ask the
         belief; or, met while going forward (the object reaches further out than the plan
         said), go ``flank_step`` further out and ``flank_step_ahead`` further forward and try
-        again (``flank_retries`` times)."""
+        again (``flank_retries`` times); or, met by the sideways push with
+        ``flank_again_ahead``, touch the face once more that much further forward."""
         p = self.params
-        if kind == "flank_ahead" and self._flank_tries < p.flank_retries:
+        if kind == "flank_ahead" and not self._flank_again and self._flank_tries < p.flank_retries:
             self._flank_tries += 1
             self._flank_plan = self._flank_plan.further(p.flank_step, p.flank_step_ahead)
             self._queue = self._flank_legs()
+        elif kind == "flank" and self._may_flank_again():
+            self._flank_again = True
+            self._flank_plan = plan = self._flank_plan.further(0.0, p.flank_again_ahead)
+            self._queue = [("flank_ahead", plan.past), ("flank", plan.push_end),
+                           ("flanked", plan.push_end)]  # fmt: skip
         else:
             self._queue = [("flanked", self._flank_plan.push_end)]
         return self._bounce()
+
+    def _may_flank_again(self) -> bool:
+        """Whether the face the flank met is to be touched again further forward (once, with
+        ``flank_again_ahead``, where the waypoints are in the workspace)."""
+        ahead = self.params.flank_again_ahead
+        if ahead is None or self._flank_again:
+            return False
+        plan = self._flank_plan.further(0.0, ahead)
+        return self.in_workspace(plan.past) and self.in_workspace(plan.push_end)
 
     def _leave_lane(self, xy, from_touch: bool = False, at_once: bool = False) -> None:
         """Done with what the lane's push felt: withdraw, or, where the belief places it
