@@ -107,6 +107,24 @@ def test_fb_slide_stopped_by_the_box_tries_the_next_approach():
     assert not alone.success, alone.reason
 
 
+def test_an_end_descent_shifted_sideways_moves_back_in_line_before_sliding():
+    """FB's box (long axis along world y): an end approach 13.9 cm beyond its +y end, the
+    descent shifted 5 cm to -x. The slide first moves back in line, then along, and the box
+    is lifted at the first attempt. Sliding straight from the shifted point instead, a finger
+    (its bubble 2.2 cm clear of the long face when in line) would still be 4.3 cm off line
+    where its pad reaches the box's end: it meets the end face, and nothing is lifted."""
+    scene = load_scene("FB")
+    built = build_grasp_scene(scene)
+    plant_context = built.plant.GetMyContextFromRoot(make_simulator(built).get_context())
+    rotation = built.free_bodies[scene.target].EvalPoseInWorld(plant_context).rotation()
+    along, across = rotation.matrix()[:2, 1], rotation.matrix()[:2, 0]
+    end, shift = 0.139 * along / np.linalg.norm(along), -0.05 * across / np.linalg.norm(across)
+    shifted = _grasp("FB", CRACKER_BOX, approach_offsets=[end], side_shifts=[shift])
+    assert shifted.success and shifted.attempts == 1, shifted.reason
+    diagonal = _grasp("FB", CRACKER_BOX, approach_offsets=[end + shift])
+    assert not diagonal.success, diagonal.reason
+
+
 def test_only_a_target_the_push_limit_cannot_slide_is_held_still():
     """By the models' masses and friction (``models/ycb``) and the scenes' 30 N push limit: BC's
     10 kg box needs 0.5 * 10 * 9.81 = 49 N to slide, TC's 2 kg can 9.8 N."""

@@ -27,10 +27,10 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 
-from stucco_drake.core.box_approach import box_approach_offsets
+from stucco_drake.core.box_approach import aside_shifts, box_approach_offsets
 from stucco_drake.core.grasp_choice import PAD_HALF_WIDTH, grasp_at, grasp_closes
 from stucco_drake.core.grasp_yaw import cylinder_grasp_yaws
-from stucco_drake.core.hypothesis_params import check_box_approach
+from stucco_drake.core.hypothesis_params import END_APPROACHES, check_box_approach
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.scenes.builder import GRIPPER, IIWA, BuiltScene, build_scene, yaw_of
 from stucco_drake.scenes.scene_file import SceneFile
@@ -187,17 +187,21 @@ def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
     on as ``box_approach`` says (:attr:`~stucco_drake.core.hypothesis_params.HypothesisParams.
     box_approach`): ``"end"`` beyond an end and along it (the end whose descent keeps the
     fingers off ``clutter`` first, then straight down, then the other end when a descent is
-    blocked: :func:`~stucco_drake.core.box_approach.box_approach_offsets`), ``"top"`` straight.
+    blocked: :func:`~stucco_drake.core.box_approach.box_approach_offsets`), ``"end_aside"``
+    likewise with each end's descent shifted sideways off ``clutter``
+    (:func:`~stucco_drake.core.box_approach.aside_shifts`), ``"top"`` straight.
     """
     context = simulator.get_context()
     X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
     x, y, yaw = (float(v) for v in target_pose)
-    if check_box_approach(box_approach) == "end" and isinstance(target_shape, BoxSdf):
+    if check_box_approach(box_approach) in END_APPROACHES and isinstance(target_shape, BoxSdf):
         centre = grasp_at(np.array([x, y, yaw]), target_shape)[0, :2]
-        offsets = box_approach_offsets((*centre, yaw), target_shape.half_extents, clutter,
-                                       X_WG.translation()[:2])  # fmt: skip
+        half = target_shape.half_extents
+        offsets = box_approach_offsets((*centre, yaw), half, clutter, X_WG.translation()[:2])
+        shifts = aside_shifts((*centre, yaw), half, offsets, clutter) \
+            if box_approach == "end_aside" else None
         return execute_grasp(built, simulator, (x, y, yaw), target_shape,
-                             approach_offsets=offsets)  # fmt: skip
+                             approach_offsets=offsets, side_shifts=shifts)  # fmt: skip
     yaws = cylinder_grasp_yaws((x, y), clutter, yaw_of(X_WG.rotation()))
     return execute_grasp(built, simulator, (x, y, yaw), target_shape, cylinder_yaws=yaws)
 
@@ -241,7 +245,7 @@ def _grasp_context(built: BuiltScene, simulator: Simulator):
 
 def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_shape, *,
                   min_lift: float = 0.05, cylinder_yaws=None,
-                  approach_offsets=None) -> GraspResult:  # fmt: skip
+                  approach_offsets=None, side_shifts=None) -> GraspResult:  # fmt: skip
     """Grasps at ``target_pose`` (RigidTransform X_WO or (x, y, yaw); m, rad, world) a target of
     ``target_shape`` (BoxSdf / CylinderSdf in the target's frame) and lifts it 10 cm.
 
@@ -254,7 +258,8 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     included) miss known clutter; the next is tried when a descent is blocked (see
     :class:`GraspExecutor`). A box is closed on across its short side only; its
     ``approach_offsets`` ((k, 2) m, world; default straight down alone) are where the attempts
-    descend, in turn, from the grasp point before sliding to it (see :class:`GraspExecutor`).
+    descend, in turn, from the grasp point before sliding to it, each shifted sideways by its
+    row of ``side_shifts`` ((k, 2) m, world; default none; see :class:`GraspExecutor`).
     A target that is not between the fingers once they have closed fails there: the lift and
     hold are not simulated (``sim_time`` is then shorter).
     """
@@ -275,12 +280,14 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     yaws = [yaw_of(X_WG.rotation())] if cylinder_yaws is None else list(cylinder_yaws)
     x, y, yaw, z_grasp = grasp_pose(target_pose, target_shape, yaws[0])
     retry_yaws, offsets = yaws[1:] if isinstance(target_shape, CylinderSdf) else (), None
+    shifts = None
     if isinstance(target_shape, BoxSdf) and approach_offsets is not None:
         offsets = np.asarray(approach_offsets, dtype=np.float64).reshape(-1, 2)
         retry_yaws = [yaw] * (len(offsets) - 1)
+        shifts = None if side_shifts is None else np.asarray(side_shifts, dtype=np.float64)
     executor_context = executor.GetMyMutableContextFromRoot(context)
     executor.start(executor_context, (x, y), yaw, SAFE_HEIGHT, z_grasp, retry_yaws=retry_yaws,
-                   approach_offsets=offsets)  # fmt: skip
+                   approach_offsets=offsets, side_shifts=shifts)  # fmt: skip
     t0, wall0 = context.get_time(), time.perf_counter()
 
     # A blocked descent or slide starts a new attempt, which restarts the phase clock.

@@ -35,7 +35,7 @@ from stucco_drake.bor.episode import make_bor_simulator, run_episode
 from stucco_drake.bor.grasp import build_grasp_scene, estimate_clutter, grasp_at_pose
 from stucco_drake.bor.policies import PolicySettings, coverage_scene, policy_info
 from stucco_drake.core.coverage import CoverageParams
-from stucco_drake.core.hypothesis_params import HypothesisParams
+from stucco_drake.core.hypothesis_params import END_APPROACHES, HypothesisParams
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.eval.episode_log import EpisodeLog, box_spec, cylinder_spec
@@ -321,12 +321,12 @@ def grasp_true_pose(log: EpisodeLog, scene: str | None = None, *, box_approach: 
     flush against clutter can fail here: a finger lands on the neighbour). ``scene`` as
     :func:`grasp_from_log`'s; a round target is closed on along the gripper's yaw, a box gone
     down on as ``box_approach`` says (:func:`~stucco_drake.bor.grasp.grasp_at_pose`; with
-    ``"end"`` its descents ordered by the contacts sensed on other objects, what an exact
-    estimate leaves unexplained). Returns the
+    ``"end"`` or ``"end_aside"`` its descents ordered, and shifted, by the contacts sensed on
+    other objects, what an exact estimate leaves unexplained). Returns the
     :class:`~stucco_drake.bor.grasp.GraspResult`."""
     built = _grasp_scene(log.scene if scene is None else str(scene))
     shape = target_shape(built)
-    ends = isinstance(shape, BoxSdf) and box_approach == "end"
+    ends = isinstance(shape, BoxSdf) and box_approach in END_APPROACHES
     clutter = log.contact_points[log.contact_object > 0] if ends else np.zeros((0, 3))
     return _grasp_at_final_state(log, built, log.object_poses[-1, 0], clutter, shape,
                                  box_approach=box_approach)

@@ -12,6 +12,12 @@ that descent, or the slide after it, is blocked, the straight one onto the grasp
 next, and the other end last: it lies on the side the robot has explored least (behind the
 box, seen from where it rummaged; on the development layouts of every family a finger's spot
 there is taken).
+
+Clutter may stand beyond an end as well (a can shoved there while rummaging). With
+``box_approach: end_aside`` an end's descent is shifted sideways, across the box's long axis,
+to where the open fingers are farthest from the felt points; the slide then moves back in
+line first, shoving aside what the shift kept the finger off (:func:`aside_shifts`).
+
 Pure numpy; world frame, metres and radians.
 """
 
@@ -66,4 +72,45 @@ def box_approach_offsets(pose, half_extents, obstacle_points, gripper_xy, *,
     return np.array([ends[order[0]], np.zeros(2), ends[order[1]]])
 
 
-__all__ = ["box_approach_offsets"]
+#: Sideways shifts (m) of an end's descent that :func:`aside_shifts` chooses among (and none).
+SIDE_SHIFTS = (0.025, 0.05)
+
+
+def aside_shifts(pose, half_extents, offsets, obstacle_points, *, shifts=SIDE_SHIFTS,
+                 clearance: float = 0.08, finger_offset: float = OPEN_FINGER_OFFSET,
+                 ) -> np.ndarray:  # fmt: skip
+    """(k, 2) sideways shifts (m, world) of the descents at ``offsets`` ((k, 2), from
+    :func:`box_approach_offsets`): across the box's long axis, by 0 or one of ``shifts``
+    away from the obstacle point nearest the unshifted fingers (moving back in line, the
+    finger then shoves what it was kept off outwards, never across the slide's path), the
+    one keeping the two open fingers' plate centres farthest from ``obstacle_points`` (the
+    distance capped at ``clearance``; on a tie the smallest shift). The straight descent,
+    offset (0, 0), is not shifted. ``pose`` and ``half_extents`` as
+    :func:`box_approach_offsets`'s."""
+    x, y, yaw = as_finite_array(pose, "pose", (3,))
+    offsets = np.asarray(offsets, dtype=np.float64).reshape(-1, 2)
+    hx, hy = (float(h) for h in np.asarray(half_extents, dtype=np.float64)[:2])
+    local = np.array([0.0, 1.0]) if hx > hy else np.array([1.0, 0.0])
+    across = rotations(np.array([yaw]))[0] @ local
+    _, points = checked_obstacles((x, y), obstacle_points)
+    chosen = np.zeros_like(offsets)
+    if not len(points):
+        return chosen
+    fingers_at = finger_offset * np.array([across, -across])
+    for i, offset in enumerate(offsets):
+        if not np.any(offset):
+            continue
+        descent = np.array([x, y]) + offset
+        gaps = np.linalg.norm(descent + fingers_at[:, None] - points[None], axis=-1)
+        nearest = points[int(np.argmin(gaps.min(axis=0)))]
+        away = -1.0 if (nearest - descent) @ across > 0 else 1.0
+        candidates = np.array([0.0, *(away * abs(d) for d in shifts)])
+        fingers = (descent + candidates[:, None] * across)[:, None, :] + fingers_at[None]
+        distance = np.linalg.norm(fingers[:, :, None, :] - points[None, None], axis=-1)
+        room = np.minimum(distance.min(axis=(1, 2)), clearance)
+        best = np.lexsort((np.abs(candidates), -np.round(room, 9)))[0]
+        chosen[i] = candidates[best] * across
+    return chosen
+
+
+__all__ = ["SIDE_SHIFTS", "aside_shifts", "box_approach_offsets"]

@@ -49,6 +49,13 @@ class FlankTouch:
         return FlankTouch(self.side + out, self.past + out + forward, self.push_end + forward,
                           self.away, self.ahead)  # fmt: skip
 
+    def legs(self) -> list[tuple[str, np.ndarray]]:
+        """The touch as a policy's queue of (kind, waypoint): the sideways move, the forward
+        move (``"flank_ahead"``), the sideways push (``"flank"``), and ``"flanked"`` where it
+        ends (the marker after which the policy assesses)."""
+        return [("move", self.side), ("flank_ahead", self.past), ("flank", self.push_end),
+                ("flanked", self.push_end)]  # fmt: skip
+
 
 def plan_flank(gripper_xy, contact_xy, push, footprint, reach: float, *, depth: float,
                margin: float, back_off: float, centred: float = 0.01,

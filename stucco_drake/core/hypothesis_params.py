@@ -7,7 +7,9 @@ import dataclasses
 import numpy as np
 
 #: How the grasp of a box goes down (:attr:`HypothesisParams.box_approach`).
-BOX_APPROACHES = ("top", "end")
+BOX_APPROACHES = ("top", "end", "end_aside")
+#: Those that go down beyond an end of a box and slide along it.
+END_APPROACHES = ("end", "end_aside")
 
 
 def check_box_approach(value) -> str:
@@ -65,7 +67,9 @@ class HypothesisParams:
             point; ``"end"`` beyond the end whose descent keeps the open fingers off the
             clutter felt, then sliding along the box to the grasp point (straight down, then
             the other end, when a descent or a slide is blocked:
-            :mod:`~stucco_drake.core.box_approach`).
+            :mod:`~stucco_drake.core.box_approach`); ``"end_aside"`` as ``"end"``, each end's
+            descent shifted sideways off the clutter felt beyond it, back in line before
+            the slide (:func:`~stucco_drake.core.box_approach.aside_shifts`).
         still_when_unslidable: search only motion scale 0 (the points where sensed) when
             the gripper's push limit cannot slide the target, by its mass and friction
             (:func:`~stucco_drake.core.motion_scale.scales_under_push_limit`); False (the

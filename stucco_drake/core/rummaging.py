@@ -37,11 +37,10 @@ import numpy as np
 
 from stucco_drake.core.flank import plan_flank
 from stucco_drake.core.lane_walk import LaneWalk
+from stucco_drake.core.motion_scale import GRAVITY
 from stucco_drake.core.probing import FaceProbePolicy, outline_box
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
-
-GRAVITY = 9.81  # m/s^2
 
 
 def _belief_of(belief) -> tuple[np.ndarray | None, float]:
@@ -329,13 +328,8 @@ class BeliefRummagingPolicy(LaneWalk):
         if flank is None:
             return False
         self._flank_plan, self._flank_tries, self._flank_again = flank, 0, False
-        self._queue[:1] = self._flank_legs()
+        self._queue[:1] = self._flank_plan.legs()
         return True
-
-    def _flank_legs(self) -> list[tuple[str, np.ndarray]]:
-        plan = self._flank_plan
-        return [("move", plan.side), ("flank_ahead", plan.past), ("flank", plan.push_end),
-                ("flanked", plan.push_end)]  # fmt: skip
 
     def _flank_touched(self, kind: str) -> np.ndarray:
         """The flank touch met something it did not push along: back off, then ask the
@@ -347,12 +341,11 @@ class BeliefRummagingPolicy(LaneWalk):
         if kind == "flank_ahead" and not self._flank_again and self._flank_tries < p.flank_retries:
             self._flank_tries += 1
             self._flank_plan = self._flank_plan.further(p.flank_step, p.flank_step_ahead)
-            self._queue = self._flank_legs()
+            self._queue = self._flank_plan.legs()
         elif kind == "flank" and self._may_flank_again():
             self._flank_again = True
-            self._flank_plan = plan = self._flank_plan.further(0.0, p.flank_again_ahead)
-            self._queue = [("flank_ahead", plan.past), ("flank", plan.push_end),
-                           ("flanked", plan.push_end)]  # fmt: skip
+            self._flank_plan = self._flank_plan.further(0.0, p.flank_again_ahead)
+            self._queue = self._flank_plan.legs()[1:]  # from beside the object already
         else:
             self._queue = [("flanked", self._flank_plan.push_end)]
         return self._bounce()

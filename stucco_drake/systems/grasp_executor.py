@@ -19,7 +19,9 @@ clock, the phases listed in :data:`PHASES`:
 5. ``slide``: at the grasp height, slide from where the descent ended to the grasp point, the
    open fingers either side of the target (a box approached along its long axis from beyond
    an end: the fingers shove aside what stands beside its long faces, where a descent from
-   above would land on it). An attempt without an offset skips it (it lasts 0 s). The slide is
+   above would land on it). An attempt may also descend shifted sideways from its offset
+   (clear of something standing beyond the end); its slide first moves back in line, shoving
+   that aside, then slides on. An attempt without an offset skips it (it lasts 0 s). The slide is
    guarded as the descent is: when the measured gripper trails the reference by more than
    ``slide_tolerance`` across the table (something stops the fingers short of the grasp
    point), the next attempt, if any, starts;
@@ -65,13 +67,16 @@ MAX_ATTEMPTS = 4
 # State layout: mode, t0 (of the current attempt), q_cmd (7), then the plan: start (x, y, z,
 # yaw), grasp (x, y, yaw), z_safe, z_grasp, finger position at start, q_nominal (7), the height
 # the raise phase reaches, the attempt's index, the number of attempts, their yaws, their
-# approach offsets (x, y each).
+# approach offsets (x, y each), their sideways shifts of the descent (x, y each).
 _MODE, _T0, _Q = 0, 1, slice(2, 9)
 _START, _GRASP, _ZS, _ZG, _F0, _QN = slice(9, 13), slice(13, 16), 16, 17, 18, slice(19, 26)
 _GRASP_YAW = _GRASP.stop - 1
 _ZR, _ATTEMPT, _N_YAWS, _YAWS = 26, 27, 28, slice(29, 29 + MAX_ATTEMPTS)
 _OFFSETS = slice(_YAWS.stop, _YAWS.stop + 2 * MAX_ATTEMPTS)
-_N_STATE = _OFFSETS.stop
+_SHIFTS = slice(_OFFSETS.stop, _OFFSETS.stop + 2 * MAX_ATTEMPTS)
+_N_STATE = _SHIFTS.stop
+#: Share of a shifted attempt's slide spent moving back in line from the shifted descent.
+_SHIFT_SHARE = 0.4
 _DESCEND, _SLIDE = PHASES.index("descend"), PHASES.index("slide")
 
 
@@ -154,7 +159,7 @@ class GraspExecutor(LeafSystem):
         return float(ends[PHASES.index(name)])
 
     def start(self, context, grasp_xy, grasp_yaw: float, z_safe: float, z_grasp: float,
-              retry_yaws=(), approach_offsets=None):
+              retry_yaws=(), approach_offsets=None, side_shifts=None):
         """Arms the sequence on this system's ``context``, from the measured robot state.
 
         Args:
@@ -169,6 +174,9 @@ class GraspExecutor(LeafSystem):
             approach_offsets: per attempt (the first, then one per retry yaw), the offset
                 (dx, dy) (m, world) from ``grasp_xy`` where it descends before sliding to
                 ``grasp_xy`` (``slide``); None: every attempt descends onto ``grasp_xy``.
+            side_shifts: per attempt, a shift (dx, dy) (m, world) of its descent point from
+                the offset: the slide first moves back to the offset, then on to ``grasp_xy``
+                (an attempt without an offset is not shifted); None: no shifts.
         """
         yaws = [float(grasp_yaw), *(float(y) for y in retry_yaws)]
         if len(yaws) > MAX_ATTEMPTS or not np.all(np.isfinite(yaws)):
@@ -178,6 +186,12 @@ class GraspExecutor(LeafSystem):
         if offsets.shape != (len(yaws), 2) or not np.all(np.isfinite(offsets)):
             raise ValueError(f"need one finite (dx, dy) approach offset per attempt "
                              f"({len(yaws)}), got shape {offsets.shape}")
+        shifts = np.zeros((len(yaws), 2)) if side_shifts is None \
+            else np.asarray(side_shifts, dtype=np.float64)
+        if shifts.shape != (len(yaws), 2) or not np.all(np.isfinite(shifts)):
+            raise ValueError(f"need one finite (dx, dy) side shift per attempt ({len(yaws)}), "
+                             f"got shape {shifts.shape}")
+        shifts[~np.any(offsets, axis=1)] = 0.0  # a straight descent has no slide to shift
         q = self.get_input_port(1).Eval(context)[:self._nq]
         state = np.zeros(_N_STATE)
         state[_GRASP][:2] = grasp_xy
@@ -185,6 +199,7 @@ class GraspExecutor(LeafSystem):
         state[_QN] = q[self._kin.q_index]
         state[_N_YAWS], state[_YAWS][:len(yaws)] = len(yaws), yaws
         state[_OFFSETS][:offsets.size] = offsets.ravel()
+        state[_SHIFTS][:shifts.size] = shifts.ravel()
         state, v_state = self._attempt(state, 0, q, context.get_time())
         context.SetDiscreteState(int(self._state), state)
         context.SetDiscreteState(int(self._v_state), v_state)
@@ -233,6 +248,11 @@ class GraspExecutor(LeafSystem):
         """(dx, dy) approach offset of the plan's current attempt (m, world)."""
         return s[_OFFSETS].reshape(MAX_ATTEMPTS, 2)[int(s[_ATTEMPT])]
 
+    @staticmethod
+    def _shift(s) -> np.ndarray:
+        """(dx, dy) sideways shift of the current attempt's descent (m, world)."""
+        return s[_SHIFTS].reshape(MAX_ATTEMPTS, 2)[int(s[_ATTEMPT])]
+
     def _ends_of(self, s) -> tuple[np.ndarray, np.ndarray]:
         """(phase ends, phase durations) (s) of the plan's current attempt: without an
         approach offset the ``slide`` lasts 0 s."""
@@ -242,7 +262,7 @@ class GraspExecutor(LeafSystem):
         """Gripper pose (x, y, z, yaw), its rate, and the finger command at plan time t."""
         x0, y0, z0, yaw0 = s[_START]
         xg, yg, yaw_g = s[_GRASP]
-        xd, yd = np.array([xg, yg]) + self._offset(s)
+        xd, yd = np.array([xg, yg]) + self._offset(s) + self._shift(s)
         zs, zg, zr = s[_ZS], s[_ZG], s[_ZR]
         poses = [(x0, y0, z0, yaw0), (x0, y0, zr, yaw0), (x0, y0, zr, yaw0),
                  (xd, yd, zs, yaw_g), (xd, yd, zg, yaw_g), (xg, yg, zg, yaw_g),
@@ -255,10 +275,18 @@ class GraspExecutor(LeafSystem):
         k = int(np.searchsorted(ends, t, side="right"))
         if k >= len(PHASES):
             return np.array(poses[-1]), np.zeros(4), fingers[-1], 0.0, len(PHASES)
-        t_begin = ends[k] - durations[k]
-        value, slope = _min_jerk((t - t_begin) / durations[k])
+        t_begin, duration = ends[k] - durations[k], durations[k]
         a, b = np.array(poses[k]), np.array(poses[k + 1])
-        rate = slope / durations[k]
+        if k == _SLIDE and np.any(self._shift(s)):
+            # Back in line first (shoving aside what the shift kept the descent off), then on.
+            back = (1.0 - _SHIFT_SHARE) * duration
+            in_line = a - np.array([*self._shift(s), 0.0, 0.0])
+            if t - t_begin < _SHIFT_SHARE * duration:
+                b, duration = in_line, _SHIFT_SHARE * duration
+            else:
+                a, t_begin, duration = in_line, t_begin + _SHIFT_SHARE * duration, back
+        value, slope = _min_jerk((t - t_begin) / duration)
+        rate = slope / duration
         f = fingers[k] + value * (fingers[k + 1] - fingers[k])
         pose, pose_rate = a + value * (b - a), rate * (b - a)
         if PHASES[k] == "transit":
