@@ -90,7 +90,8 @@ def test_bad_input_is_refused():
 
 
 def test_an_unknown_box_approach_is_refused_in_one_line():
-    with pytest.raises(ValueError, match=r"^box_approach: expected one of top, end, end_aside, got 'side'$"):
+    refused = r"^box_approach: expected one of top, end, end_aside, got 'side'$"
+    with pytest.raises(ValueError, match=refused):
         HypothesisParams(box_approach="side")
     with pytest.raises(ValueError, match="box_approach"):
         settings_with(HypothesisParams(), {"box_approach": 1}, "--hypothesis-params ")
