@@ -187,7 +187,7 @@ class GraspExecutor(LeafSystem):
             raise ValueError(f"need one finite (dx, dy) approach offset per attempt "
                              f"({len(yaws)}), got shape {offsets.shape}")
         shifts = np.zeros((len(yaws), 2)) if side_shifts is None \
-            else np.asarray(side_shifts, dtype=np.float64)
+            else np.array(side_shifts, dtype=np.float64)  # a copy: zeroed where straight
         if shifts.shape != (len(yaws), 2) or not np.all(np.isfinite(shifts)):
             raise ValueError(f"need one finite (dx, dy) side shift per attempt ({len(yaws)}), "
                              f"got shape {shifts.shape}")
@@ -279,12 +279,11 @@ class GraspExecutor(LeafSystem):
         a, b = np.array(poses[k]), np.array(poses[k + 1])
         if k == _SLIDE and np.any(self._shift(s)):
             # Back in line first (shoving aside what the shift kept the descent off), then on.
-            back = (1.0 - _SHIFT_SHARE) * duration
-            in_line = a - np.array([*self._shift(s), 0.0, 0.0])
-            if t - t_begin < _SHIFT_SHARE * duration:
-                b, duration = in_line, _SHIFT_SHARE * duration
+            in_line, back = a - np.array([*self._shift(s), 0.0, 0.0]), _SHIFT_SHARE * duration
+            if t - t_begin < back:
+                b, duration = in_line, back
             else:
-                a, t_begin, duration = in_line, t_begin + _SHIFT_SHARE * duration, back
+                a, t_begin, duration = in_line, t_begin + back, duration - back
         value, slope = _min_jerk((t - t_begin) / duration)
         rate = slope / duration
         f = fingers[k] + value * (fingers[k + 1] - fingers[k])
