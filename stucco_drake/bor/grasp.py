@@ -280,11 +280,10 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     yaws = [yaw_of(X_WG.rotation())] if cylinder_yaws is None else list(cylinder_yaws)
     x, y, yaw, z_grasp = grasp_pose(target_pose, target_shape, yaws[0])
     retry_yaws, offsets = yaws[1:] if isinstance(target_shape, CylinderSdf) else (), None
-    shifts = None
+    shifts = None  # a box's only, with its offsets (the executor checks them)
     if isinstance(target_shape, BoxSdf) and approach_offsets is not None:
         offsets = np.asarray(approach_offsets, dtype=np.float64).reshape(-1, 2)
-        retry_yaws = [yaw] * (len(offsets) - 1)
-        shifts = None if side_shifts is None else np.asarray(side_shifts, dtype=np.float64)
+        retry_yaws, shifts = [yaw] * (len(offsets) - 1), side_shifts
     executor_context = executor.GetMyMutableContextFromRoot(context)
     executor.start(executor_context, (x, y), yaw, SAFE_HEIGHT, z_grasp, retry_yaws=retry_yaws,
                    approach_offsets=offsets, side_shifts=shifts)  # fmt: skip

@@ -31,6 +31,24 @@ from stucco_drake.core.icp import rotations
 from stucco_drake.core.validation import as_finite_array
 
 
+def _long_axis(yaw: float, half_extents) -> tuple[np.ndarray, np.ndarray, float]:
+    """(axis, across, half length): unit vectors (world) along the box's long horizontal axis
+    and across it, and its half length (m)."""
+    hx, hy = (float(h) for h in np.asarray(half_extents, dtype=np.float64)[:2])
+    local = np.array([1.0, 0.0]) if hx > hy else np.array([0.0, 1.0])
+    axis = rotations(np.array([yaw]))[0] @ local
+    return axis, np.array([-axis[1], axis[0]]), max(hx, hy)
+
+
+def _finger_room(descents, across, points, finger_offset: float, clearance: float) -> np.ndarray:
+    """(k,) distance (m) from the nearer of the two open fingers' plate centres
+    (``finger_offset`` either side along ``across``) at each of ``descents`` ((k, 2)) to the
+    nearest of ``points`` ((n, 2), n >= 1), capped at ``clearance``."""
+    fingers = descents[:, None, :] + finger_offset * np.array([across, -across])[None]
+    distance = np.linalg.norm(fingers[:, :, None, :] - points[None, None], axis=-1)
+    return np.minimum(distance.min(axis=(1, 2)), clearance)
+
+
 def box_approach_offsets(pose, half_extents, obstacle_points, gripper_xy, *,
                          margin: float = 0.01, clearance: float = 0.08,
                          finger_offset: float = OPEN_FINGER_OFFSET) -> np.ndarray:  # fmt: skip
@@ -52,21 +70,13 @@ def box_approach_offsets(pose, half_extents, obstacle_points, gripper_xy, *,
         gripper_xy: (2,) where the gripper is (m, world).
     """
     x, y, yaw = as_finite_array(pose, "pose", (3,))
-    hx, hy = (float(h) for h in np.asarray(half_extents, dtype=np.float64)[:2])
     gripper = as_finite_array(gripper_xy, "gripper_xy", (2,))
     _, points = checked_obstacles((x, y), obstacle_points)
-    local = np.array([1.0, 0.0]) if hx > hy else np.array([0.0, 1.0])
-    axis = rotations(np.array([yaw]))[0] @ local
-    across = np.array([-axis[1], axis[0]])
-    reach = max(hx, hy) + PAD_HALF_WIDTH + margin
-    ends = np.array([axis, -axis]) * reach
+    axis, across, half_length = _long_axis(yaw, half_extents)
+    ends = np.array([axis, -axis]) * (half_length + PAD_HALF_WIDTH + margin)
     descents = np.array([x, y]) + ends
-    if len(points):
-        fingers = descents[:, None, :] + finger_offset * np.array([across, -across])[None]
-        distance = np.linalg.norm(fingers[:, :, None, :] - points[None, None], axis=-1)
-        room = np.minimum(distance.min(axis=(1, 2)), clearance)
-    else:
-        room = np.full(2, clearance)
+    room = _finger_room(descents, across, points, finger_offset, clearance) if len(points) \
+        else np.full(2, clearance)
     near = np.linalg.norm(descents - gripper, axis=1)
     order = np.lexsort((near, -room))
     return np.array([ends[order[0]], np.zeros(2), ends[order[1]]])
@@ -89,9 +99,7 @@ def aside_shifts(pose, half_extents, offsets, obstacle_points, *, shifts=SIDE_SH
     :func:`box_approach_offsets`'s."""
     x, y, yaw = as_finite_array(pose, "pose", (3,))
     offsets = np.asarray(offsets, dtype=np.float64).reshape(-1, 2)
-    hx, hy = (float(h) for h in np.asarray(half_extents, dtype=np.float64)[:2])
-    local = np.array([0.0, 1.0]) if hx > hy else np.array([1.0, 0.0])
-    across = rotations(np.array([yaw]))[0] @ local
+    _, across, _ = _long_axis(yaw, half_extents)
     _, points = checked_obstacles((x, y), obstacle_points)
     chosen = np.zeros_like(offsets)
     if not len(points):
@@ -105,9 +113,8 @@ def aside_shifts(pose, half_extents, offsets, obstacle_points, *, shifts=SIDE_SH
         nearest = points[int(np.argmin(gaps.min(axis=0)))]
         away = -1.0 if (nearest - descent) @ across > 0 else 1.0
         candidates = np.array([0.0, *(away * abs(d) for d in shifts)])
-        fingers = (descent + candidates[:, None] * across)[:, None, :] + fingers_at[None]
-        distance = np.linalg.norm(fingers[:, :, None, :] - points[None, None], axis=-1)
-        room = np.minimum(distance.min(axis=(1, 2)), clearance)
+        room = _finger_room(descent + candidates[:, None] * across, across, points,
+                            finger_offset, clearance)  # fmt: skip
         best = np.lexsort((np.abs(candidates), -np.round(room, 9)))[0]
         chosen[i] = candidates[best] * across
     return chosen
