@@ -12,6 +12,7 @@ from stucco_drake.bor.grasp import build_grasp_scene, execute_grasp, geometric_c
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.scenes import load_scene
 from stucco_drake.scenes.playback import make_simulator
+from stucco_drake.systems.grasp_executor import PHASES
 
 # The targets' geometry in their body frames (the scene files' model sizes, m).
 CRACKER_BOX = BoxSdf((0.0329, 0.079, 0.1037))
@@ -105,6 +106,36 @@ def test_fb_slide_stopped_by_the_box_tries_the_next_approach():
     alone = _grasp("FB", CRACKER_BOX, approach_offsets=[beside])
     assert alone.attempts == 1
     assert not alone.success, alone.reason
+    start = X_WO.translation()
+    assert np.hypot(*(alone.final_pose[:2] - start[:2])) > 0.10  # shoved 13.7 cm
+    assert alone.final_pose[2] < start[2] - 0.05  # and knocked over: 7.1 cm lower
+
+
+def test_a_blocked_last_attempt_withdraws_without_moving_anything():
+    """The shove of the test above, given ``withdraw_when_blocked``: the slide is blocked as
+    before, the gripper rises to the 0.30 m safe height with its fingers open, and every
+    object stays within 5 mm of where the scene put it (the potted meat can is nudged 2 mm;
+    pressing on, the box ends 13.7 cm off and the potted meat can 11 cm)."""
+    scene = load_scene("FB")
+    built = build_grasp_scene(scene)
+    simulator = make_simulator(built)
+    plant_context = built.plant.GetMyContextFromRoot(simulator.get_context())
+    start = {name: body.EvalPoseInWorld(plant_context).translation().copy()
+             for name, body in built.free_bodies.items()}
+    X_WO = built.free_bodies[scene.target].EvalPoseInWorld(plant_context)
+    across = X_WO.rotation().matrix()[:2, 0]
+    result = execute_grasp(built, simulator, X_WO, CRACKER_BOX, withdraw_when_blocked=True,
+                           approach_offsets=[0.16 * across / np.linalg.norm(across)])
+    assert result.withdrew and result.attempts == 1 and not result.success, result.reason
+    plant_context = built.plant.GetMyContextFromRoot(simulator.get_context())
+    for name, body in built.free_bodies.items():
+        moved = np.linalg.norm(body.EvalPoseInWorld(plant_context).translation() - start[name])
+        assert moved < 0.005, (name, moved)
+    assert built.gripper_frame().CalcPoseInWorld(plant_context).translation()[2] > 0.29
+    executor = built.diagram.GetSubsystemByName("grasp_executor")
+    phase = executor.GetOutputPort("grasp_phase").Eval(
+        executor.GetMyContextFromRoot(simulator.get_context()))
+    assert phase[0] == len(PHASES)  # done
 
 
 def test_an_end_descent_shifted_sideways_moves_back_in_line_before_sliding():

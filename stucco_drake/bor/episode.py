@@ -45,7 +45,8 @@ def hypotheses_grasp(bor: BorDiagram, simulator: Simulator, hypotheses):
     them), the clutter to keep the fingers from being the points that pose does not explain,
     placed by its motion scale between where they were sensed and where they are tracked (as
     :func:`stucco_drake.bor.log.grasp_from_log` does), a box gone down on as the estimator's
-    ``box_approach`` says. Without hypotheses: False."""
+    ``box_approach`` says (withdrawn when blocked as its ``withdraw_when_blocked`` says).
+    Without hypotheses: False."""
     from stucco_drake.bor.grasp import grasp_at_pose
 
     if hypotheses is None:
@@ -56,9 +57,10 @@ def hypotheses_grasp(bor: BorDiagram, simulator: Simulator, hypotheses):
     state = bor.target_estimator.estimator_state(
         bor.target_estimator.GetMyContextFromRoot(context))
     clutter = hypotheses.unexplained_points(state.sensed_points, tracked)
-    approach = bor.target_estimator.hypothesis_params.box_approach
+    params = bor.target_estimator.hypothesis_params
     return grasp_at_pose(bor.scene, simulator, hypotheses.pose, clutter, bor.target_shape,
-                         box_approach=approach)  # fmt: skip
+                         box_approach=params.box_approach,
+                         withdraw_when_blocked=params.withdraw_when_blocked)  # fmt: skip
 
 
 #: The grasp hooks of :func:`run_episode` by target-pose estimator.

@@ -58,6 +58,8 @@ class GraspResult:
         sim_time: simulated duration of the grasp (s); wall_time: its wall-clock time (s).
         attempts: descents made (more than one when a descent or a slide was blocked and another
             closing yaw or approach was tried).
+        withdrew: the last attempt was blocked and the gripper rose without closing
+            (``withdraw_when_blocked``).
     """
 
     success: bool
@@ -68,6 +70,7 @@ class GraspResult:
     sim_time: float = 0.0
     wall_time: float = 0.0
     attempts: int = 1
+    withdrew: bool = False
 
 
 def build_grasp_scene(scene: SceneFile, *, meshcat=None, external_actions: bool = True,
@@ -178,7 +181,8 @@ def _finger_positions(built: BuiltScene, plant_context) -> tuple[float, float]:
 
 
 def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
-                  target_shape, *, box_approach: str = "top") -> GraspResult:  # fmt: skip
+                  target_shape, *, box_approach: str = "top",
+                  withdraw_when_blocked: bool = False) -> GraspResult:  # fmt: skip
     """:func:`execute_grasp` at an estimated ``target_pose`` (x, y, yaw; m, rad, world).
 
     A cylinder is closed on first along the yaw that keeps the open fingers off ``clutter``
@@ -190,6 +194,7 @@ def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
     blocked: :func:`~stucco_drake.core.box_approach.box_approach_offsets`), ``"end_aside"``
     likewise with each end's descent shifted sideways off ``clutter``
     (:func:`~stucco_drake.core.box_approach.aside_shifts`), ``"top"`` straight.
+    ``withdraw_when_blocked`` as :func:`execute_grasp`'s.
     """
     context = simulator.get_context()
     X_WG = built.gripper_frame().CalcPoseInWorld(built.plant.GetMyContextFromRoot(context))
@@ -201,9 +206,11 @@ def grasp_at_pose(built: BuiltScene, simulator: Simulator, target_pose, clutter,
         shifts = aside_shifts((*centre, yaw), half, offsets, clutter) \
             if box_approach == "end_aside" else None
         return execute_grasp(built, simulator, (x, y, yaw), target_shape,
-                             approach_offsets=offsets, side_shifts=shifts)  # fmt: skip
+                             approach_offsets=offsets, side_shifts=shifts,
+                             withdraw_when_blocked=withdraw_when_blocked)  # fmt: skip
     yaws = cylinder_grasp_yaws((x, y), clutter, yaw_of(X_WG.rotation()))
-    return execute_grasp(built, simulator, (x, y, yaw), target_shape, cylinder_yaws=yaws)
+    return execute_grasp(built, simulator, (x, y, yaw), target_shape, cylinder_yaws=yaws,
+                         withdraw_when_blocked=withdraw_when_blocked)
 
 
 def estimate_clutter(estimate, points) -> np.ndarray:
@@ -244,8 +251,8 @@ def _grasp_context(built: BuiltScene, simulator: Simulator):
 
 
 def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_shape, *,
-                  min_lift: float = 0.05, cylinder_yaws=None,
-                  approach_offsets=None, side_shifts=None) -> GraspResult:  # fmt: skip
+                  min_lift: float = 0.05, cylinder_yaws=None, approach_offsets=None,
+                  side_shifts=None, withdraw_when_blocked: bool = False) -> GraspResult:
     """Grasps at ``target_pose`` (RigidTransform X_WO or (x, y, yaw); m, rad, world) a target of
     ``target_shape`` (BoxSdf / CylinderSdf in the target's frame) and lifts it 10 cm.
 
@@ -261,7 +268,9 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     descend, in turn, from the grasp point before sliding to it, each shifted sideways by its
     row of ``side_shifts`` ((k, 2) m, world; default none; see :class:`GraspExecutor`).
     A target that is not between the fingers once they have closed fails there: the lift and
-    hold are not simulated (``sim_time`` is then shorter).
+    hold are not simulated (``sim_time`` is then shorter). With ``withdraw_when_blocked``, a
+    blocked last attempt ends the grasp (a failure, ``withdrew``): the gripper rises, fingers
+    open, rather than pressing down on what stopped it.
     """
     built, simulator = _grasp_context(built, simulator)
     diagram, plant = built.diagram, built.plant
@@ -286,14 +295,21 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
         retry_yaws, shifts = [yaw] * (len(offsets) - 1), side_shifts
     executor_context = executor.GetMyMutableContextFromRoot(context)
     executor.start(executor_context, (x, y), yaw, SAFE_HEIGHT, z_grasp, retry_yaws=retry_yaws,
-                   approach_offsets=offsets, side_shifts=shifts)  # fmt: skip
+                   approach_offsets=offsets, side_shifts=shifts,
+                   withdraw=withdraw_when_blocked)  # fmt: skip
     t0, wall0 = context.get_time(), time.perf_counter()
 
-    # A blocked descent or slide starts a new attempt, which restarts the phase clock.
+    # A blocked descent or slide starts a new attempt (or the withdrawal), which restarts the
+    # phase clock.
     attempt = -1
     while attempt != executor.attempt(executor_context)[0]:
         attempt, t_attempt = executor.attempt(executor_context)
-        simulator.AdvanceTo(t_attempt + executor.phase_end(executor_context, "close"))
+        end = "raise" if executor.withdrew(executor_context) else "close"
+        # (a withdrawal's raise may already be over: the clock ran on to the attempt's close)
+        simulator.AdvanceTo(max(context.get_time(),
+                                t_attempt + executor.phase_end(executor_context, end)))
+    if executor.withdrew(executor_context):
+        return _withdrawn(built, context, target, z_before, t0, wall0, attempt)
     plant_context = plant.GetMyContextFromRoot(context)
     geometric_ok, geometry = geometric_check(
         target.EvalPoseInWorld(plant_context),
@@ -326,3 +342,16 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
         final_pose=np.array([*X_WO.translation(), yaw_of(X_WO.rotation())]),
         reason=f"{reason} (geometry: {geometry})", sim_time=context.get_time() - t0,
         wall_time=time.perf_counter() - wall0, attempts=attempt + 1)
+
+
+def _withdrawn(built: BuiltScene, context, target, z_before: float, t0: float, wall0: float,
+               attempts: int) -> GraspResult:
+    """The failed :class:`GraspResult` of a grasp whose every attempt was blocked."""
+    X_WO = target.EvalPoseInWorld(built.plant.GetMyContextFromRoot(context))
+    lift = float(X_WO.translation()[2] - z_before)
+    return GraspResult(
+        success=False, lift_height=lift, geometric_ok=False,
+        final_pose=np.array([*X_WO.translation(), yaw_of(X_WO.rotation())]),
+        reason=f"every attempt blocked ({attempts}): withdrew without closing",
+        sim_time=context.get_time() - t0, wall_time=time.perf_counter() - wall0,
+        attempts=attempts, withdrew=True)

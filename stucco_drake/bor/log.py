@@ -286,7 +286,7 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
       (:func:`~stucco_drake.eval.target_estimates.hypotheses_estimate`, with
       ``hypothesis_params``; None: the defaults); a round target is closed on away from the
       points the grasped pose does not explain, a box gone down on as their ``box_approach``
-      says.
+      says, a blocked grasp withdrawn as their ``withdraw_when_blocked`` says.
 
     The grasp then runs in a freshly built grasp scene set to the logged plant state, that of
     ``scene`` (a scene name or file; default: the shipped scene named ``log.scene``). Returns
@@ -302,34 +302,39 @@ def grasp_from_log(log: EpisodeLog, tracker, scene: str | None = None,
         if estimate is None:
             return None
         pose, clutter = estimate.pose, estimate_clutter(estimate, points)
-        approach = "top"
+        grasp = {"box_approach": "top"}
     elif estimator == "hypotheses":
         found = hypotheses_estimate(rng, log, tracker, shape, log_penetration(log),
                                     hypothesis_params, log_motion_scales(log, hypothesis_params))
         if found is None:
             return None
         pose, clutter = found.pose, found.unexplained_points(log.contact_points, points)
-        approach = (hypothesis_params or HypothesisParams()).box_approach
+        params = hypothesis_params or HypothesisParams()
+        grasp = {"box_approach": params.box_approach,
+                 "withdraw_when_blocked": params.withdraw_when_blocked}
     else:
         raise ValueError(f"estimator: expected 'rules' or 'hypotheses', got {estimator!r}")
-    return _grasp_at_final_state(log, built, pose, clutter, shape, box_approach=approach)
+    return _grasp_at_final_state(log, built, pose, clutter, shape, **grasp)
 
 
-def grasp_true_pose(log: EpisodeLog, scene: str | None = None, *, box_approach: str = "top"):
+def grasp_true_pose(log: EpisodeLog, scene: str | None = None, *, box_approach: str = "top",
+                    withdraw_when_blocked: bool = False):
     """Grasp the target at its true final pose, from the logged final state: the grasp any
     estimator would make were its estimate exact, so what the episode's end allows (a target
     flush against clutter can fail here: a finger lands on the neighbour). ``scene`` as
     :func:`grasp_from_log`'s; a round target is closed on along the gripper's yaw, a box gone
     down on as ``box_approach`` says (:func:`~stucco_drake.bor.grasp.grasp_at_pose`; with
     ``"end"`` or ``"end_aside"`` its descents ordered, and shifted, by the contacts sensed on
-    other objects, what an exact estimate leaves unexplained). Returns the
+    other objects, what an exact estimate leaves unexplained; ``withdraw_when_blocked`` as
+    :func:`~stucco_drake.bor.grasp.execute_grasp`'s). Returns the
     :class:`~stucco_drake.bor.grasp.GraspResult`."""
     built = _grasp_scene(log.scene if scene is None else str(scene))
     shape = target_shape(built)
     ends = isinstance(shape, BoxSdf) and box_approach in END_APPROACHES
     clutter = log.contact_points[log.contact_object > 0] if ends else np.zeros((0, 3))
     return _grasp_at_final_state(log, built, log.object_poses[-1, 0], clutter, shape,
-                                 box_approach=box_approach)
+                                 box_approach=box_approach,
+                                 withdraw_when_blocked=withdraw_when_blocked)
 
 
 def _grasp_at_final_state(log: EpisodeLog, built, pose, clutter, shape, **grasp_kwargs):

@@ -280,8 +280,10 @@ def score_log(path: Path, method: str, params, dx_model: str, stream: int, scale
                params if method == "stucco" else None, penetration=penetration,
                dx_model=dx_model, grasp=score)  # fmt: skip
     if truth_scenes is not None and grasp_truth:
-        approach = (hypothesis_params or HypothesisParams()).box_approach
-        result = bor_log.grasp_true_pose(log, truth_scenes[log.scene], box_approach=approach)
+        grasp = hypothesis_params or HypothesisParams()
+        result = bor_log.grasp_true_pose(log, truth_scenes[log.scene],
+                                         box_approach=grasp.box_approach,
+                                         withdraw_when_blocked=grasp.withdraw_when_blocked)
         scored[0]["true_pose_grasped"] = bool(result.success)
     return [{"base": base, **({} if k is None else {"after_actions": k}), **row}
             for k, row in zip(cuts, scored, strict=True)]

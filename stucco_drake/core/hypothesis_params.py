@@ -70,6 +70,10 @@ class HypothesisParams:
             :mod:`~stucco_drake.core.box_approach`); ``"end_aside"`` as ``"end"``, each end's
             descent shifted sideways off the clutter felt beyond it, back in line before
             the slide (:func:`~stucco_drake.core.box_approach.aside_shifts`).
+        withdraw_when_blocked: when every attempt of the grasp is blocked, the gripper rises
+            without closing rather than pressing down on what stopped it (pressing on can
+            tilt the gripper and knock the target away); False (the default) presses on, as
+            every table before it was made.
         still_when_unslidable: search only motion scale 0 (the points where sensed) when
             the gripper's push limit cannot slide the target, by its mass and friction
             (:func:`~stucco_drake.core.motion_scale.scales_under_push_limit`); False (the
@@ -98,6 +102,7 @@ class HypothesisParams:
     grasp_margin: float = 0.01
     grasp_angle_margin: float = np.radians(5.0)
     box_approach: str = "top"
+    withdraw_when_blocked: bool = False
     still_when_unslidable: bool = False
 
     def __post_init__(self):

@@ -24,7 +24,10 @@ clock, the phases listed in :data:`PHASES`:
    that aside, then slides on. An attempt without an offset skips it (it lasts 0 s). The slide is
    guarded as the descent is: when the measured gripper trails the reference by more than
    ``slide_tolerance`` across the table (something stops the fingers short of the grasp
-   point), the next attempt, if any, starts;
+   point), the next attempt, if any, starts. When the last attempt is blocked, the sequence
+   presses on by default; started with ``withdraw=True`` it withdraws instead: the gripper
+   rises straight up from where it was stopped, fingers still open, and stays there (the
+   ``grasp_phase`` output reads ``raise``, then done; :meth:`GraspExecutor.withdrew`);
 6. ``close``: close the fingers (see ``close_position``: a command beyond the closed stop, so the
    joint controller keeps squeezing once the bubbles touch the object);
 7. ``lift``: raise the gripper by ``lift``;
@@ -67,14 +70,17 @@ MAX_ATTEMPTS = 4
 # State layout: mode, t0 (of the current attempt), q_cmd (7), then the plan: start (x, y, z,
 # yaw), grasp (x, y, yaw), z_safe, z_grasp, finger position at start, q_nominal (7), the height
 # the raise phase reaches, the attempt's index, the number of attempts, their yaws, their
-# approach offsets (x, y each), their sideways shifts of the descent (x, y each).
+# approach offsets (x, y each), their sideways shifts of the descent (x, y each), whether a
+# blocked last attempt withdraws. Mode: 0 idle, 1 grasping, 2 withdrawing.
 _MODE, _T0, _Q = 0, 1, slice(2, 9)
 _START, _GRASP, _ZS, _ZG, _F0, _QN = slice(9, 13), slice(13, 16), 16, 17, 18, slice(19, 26)
 _GRASP_YAW = _GRASP.stop - 1
 _ZR, _ATTEMPT, _N_YAWS, _YAWS = 26, 27, 28, slice(29, 29 + MAX_ATTEMPTS)
 _OFFSETS = slice(_YAWS.stop, _YAWS.stop + 2 * MAX_ATTEMPTS)
 _SHIFTS = slice(_OFFSETS.stop, _OFFSETS.stop + 2 * MAX_ATTEMPTS)
-_N_STATE = _SHIFTS.stop
+_WITHDRAW = _SHIFTS.stop
+_N_STATE = _WITHDRAW + 1
+_GRASPING, _WITHDRAWING = 1.0, 2.0
 #: Share of a shifted attempt's slide spent moving back in line from the shifted descent.
 _SHIFT_SHARE = 0.4
 _DESCEND, _SLIDE = PHASES.index("descend"), PHASES.index("slide")
@@ -159,7 +165,7 @@ class GraspExecutor(LeafSystem):
         return float(ends[PHASES.index(name)])
 
     def start(self, context, grasp_xy, grasp_yaw: float, z_safe: float, z_grasp: float,
-              retry_yaws=(), approach_offsets=None, side_shifts=None):
+              retry_yaws=(), approach_offsets=None, side_shifts=None, withdraw: bool = False):
         """Arms the sequence on this system's ``context``, from the measured robot state.
 
         Args:
@@ -177,6 +183,8 @@ class GraspExecutor(LeafSystem):
             side_shifts: per attempt, a shift (dx, dy) (m, world) of its descent point from
                 the offset: the slide first moves back to the offset, then on to ``grasp_xy``
                 (an attempt without an offset is not shifted); None: no shifts.
+            withdraw: when the last attempt's descent or slide is blocked, rise straight up
+                and stay, fingers open, rather than press on (see :meth:`withdrew`).
         """
         yaws = [float(grasp_yaw), *(float(y) for y in retry_yaws)]
         if len(yaws) > MAX_ATTEMPTS or not np.all(np.isfinite(yaws)):
@@ -200,24 +208,33 @@ class GraspExecutor(LeafSystem):
         state[_N_YAWS], state[_YAWS][:len(yaws)] = len(yaws), yaws
         state[_OFFSETS][:offsets.size] = offsets.ravel()
         state[_SHIFTS][:shifts.size] = shifts.ravel()
+        state[_WITHDRAW] = float(bool(withdraw))
         state, v_state = self._attempt(state, 0, q, context.get_time())
         context.SetDiscreteState(int(self._state), state)
         context.SetDiscreteState(int(self._v_state), v_state)
 
     def attempt(self, context) -> tuple[int, float]:
-        """(index of the current attempt, its start time in s) on this system's context."""
+        """(index of the current attempt, its start time in s) on this system's context; once
+        withdrawn (:meth:`withdrew`), (the number of attempts, when the withdrawal began)."""
         s = context.get_discrete_state(self._state).value()
         return int(s[_ATTEMPT]), float(s[_T0])
 
+    def withdrew(self, context) -> bool:
+        """Whether the last attempt was blocked and the gripper withdrew (``withdraw=True``)."""
+        return bool(context.get_discrete_state(self._state).value()[_MODE] == _WITHDRAWING)
+
     def _attempt(self, plan, index: int, q, t: float):
         """The state and velocity state that start attempt ``index`` of ``plan`` at time t
-        from the measured robot positions q: raise, open, transit, descend with its yaw."""
+        from the measured robot positions q: raise, open, transit, descend with its yaw. Index
+        the number of attempts starts the withdrawal: raise, then stay."""
         self._kin.set_positions(q)
         X = self._kin.pose()
         yaw0 = float(np.arctan2(X.rotation().matrix()[1, 0], X.rotation().matrix()[0, 0]))
-        grasp_yaw = plan[_YAWS][index]
+        withdrawing = index >= plan[_N_YAWS]
+        grasp_yaw = yaw0 if withdrawing else plan[_YAWS][index]
         state = plan.copy()
-        state[_MODE], state[_T0], state[_ATTEMPT] = 1.0, t, index
+        state[_MODE] = _WITHDRAWING if withdrawing else _GRASPING
+        state[_T0], state[_ATTEMPT] = t, index
         state[_Q] = q[self._kin.q_index]
         state[_START] = [*X.translation(), yaw0]
         # The equivalent closing yaw (mod pi) nearest the current one: the least turn.
@@ -246,11 +263,15 @@ class GraspExecutor(LeafSystem):
     @staticmethod
     def _offset(s) -> np.ndarray:
         """(dx, dy) approach offset of the plan's current attempt (m, world)."""
+        if s[_MODE] == _WITHDRAWING:
+            return np.zeros(2)
         return s[_OFFSETS].reshape(MAX_ATTEMPTS, 2)[int(s[_ATTEMPT])]
 
     @staticmethod
     def _shift(s) -> np.ndarray:
         """(dx, dy) sideways shift of the current attempt's descent (m, world)."""
+        if s[_MODE] == _WITHDRAWING:
+            return np.zeros(2)
         return s[_SHIFTS].reshape(MAX_ATTEMPTS, 2)[int(s[_ATTEMPT])]
 
     def _ends_of(self, s) -> tuple[np.ndarray, np.ndarray]:
@@ -270,6 +291,9 @@ class GraspExecutor(LeafSystem):
                  (xg, yg, zg + self._lift, yaw_g)]
         fingers = [s[_F0], s[_F0], self._open, self._open, self._open, self._open,
                    self._close, self._close, self._close]
+        if s[_MODE] == _WITHDRAWING:  # raised, then still: fingers as they were
+            poses[2:] = [poses[1]] * (len(poses) - 2)
+            fingers = [s[_F0]] * len(fingers)
         ends, durations = self._ends_of(s)
         # A phase lasting 0 s ends where it begins: side="right" passes over it.
         k = int(np.searchsorted(ends, t, side="right"))
@@ -297,9 +321,11 @@ class GraspExecutor(LeafSystem):
 
     def _blocked(self, context, s, t: float, phase: int):
         """The measured robot positions when the descent (height) or the slide (across the
-        table) trails its reference by more than its tolerance and an attempt is left, else
-        None."""
-        if phase not in (_DESCEND, _SLIDE) or s[_ATTEMPT] + 1 >= s[_N_YAWS]:
+        table) trails its reference by more than its tolerance and an attempt, or the
+        withdrawal, is left, else None."""
+        if phase not in (_DESCEND, _SLIDE) or s[_MODE] != _GRASPING:
+            return None
+        if s[_ATTEMPT] + 1 >= s[_N_YAWS] and not s[_WITHDRAW]:
             return None
         q_measured = self.get_input_port(1).Eval(context)[:self._nq]
         self._kin.set_positions(q_measured)
@@ -361,4 +387,7 @@ class GraspExecutor(LeafSystem):
         if s[_MODE] == 0.0:
             output.SetFromVector([-1.0])
             return
-        output.SetFromVector([float(self._reference(s, context.get_time() - s[_T0])[4])])
+        phase = self._reference(s, context.get_time() - s[_T0])[4]
+        if s[_MODE] == _WITHDRAWING and phase > 0:
+            phase = len(PHASES)  # raised: nothing more to do
+        output.SetFromVector([float(phase)])
