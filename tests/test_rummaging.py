@@ -333,3 +333,25 @@ def test_a_confidence_no_probe_has_borne_out_does_not_stop_the_policy():
                                   dataclasses.replace(params, verified_stop=False))
     _positions, steps, _ = play(hasty, pose, belief)
     assert len(steps) == first + 1 and hasty.rounds == 0
+
+
+def test_an_unsure_belief_extends_the_budget_a_sure_one_stops_at_it():
+    """Nothing on the table, 10 actions, extended to 16 below a confidence of 0.6: a belief
+    at 0.9 stops the run at 10, one at 0.5 at 16, and one that reaches 0.9 once 13 actions
+    are played at 13. Without ``extend_below`` the budget is 10 whatever the belief."""
+    def run(confidence, **extension):
+        params = RummageParams(coverage=BAND_NEAREST, max_actions=10, transit_back=0.0,
+                               **extension)
+        policy = BeliefRummagingPolicy(BOX, FOOTPRINT, MAX_STEP, START, params)
+        H = dataclasses.make_dataclass("H", ["pose", "confidence"])
+        _positions, steps, _ = play(policy, None,
+                                    lambda: H(np.zeros(3), confidence(policy.actions)))
+        return len(steps)
+
+    extension = {"extend_below": 0.6, "extended_max_actions": 16}
+    assert run(lambda k: 0.9, **extension) == 10
+    assert run(lambda k: 0.5, **extension) == 16
+    assert run(lambda k: 0.9 if k >= 13 else 0.5, **extension) == 13
+    assert run(lambda k: 0.5) == 10
+    with pytest.raises(ValueError, match="extended_max_actions"):
+        RummageParams(max_actions=10, extend_below=0.6, extended_max_actions=10)

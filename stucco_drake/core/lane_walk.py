@@ -29,6 +29,15 @@ from stucco_drake.core.rummage_params import RummageParams
 Waypoint = tuple[str, np.ndarray]
 
 
+def belief_of(belief) -> tuple[np.ndarray | None, float]:
+    """(likeliest pose or None, confidence) of the pose hypotheses ``belief`` (an object with
+    ``pose`` and ``confidence``, None, or a function returning either)."""
+    belief = belief() if callable(belief) else belief
+    if belief is None:
+        return None, 0.0
+    return np.asarray(belief.pose, dtype=np.float64), float(belief.confidence)
+
+
 class LaneWalk:
     """The lanes and the queue of waypoints (see the module's docstring). A subclass
     implements :meth:`_decide` (the step of each action), :meth:`_felt` (a push sensed
@@ -80,7 +89,7 @@ class LaneWalk:
 
     def next_step(self, gripper_xy, in_contact: bool, belief) -> np.ndarray | None:
         """The next action's step (m, W), or None once stopped."""
-        if self.actions >= self.params.max_actions or self._stopped:
+        if self._stopped or self._spent(belief):
             return None
         xy = np.asarray(gripper_xy, dtype=np.float64)
         step = self._decide(xy, bool(in_contact), belief)
@@ -92,6 +101,16 @@ class LaneWalk:
         self.action_kinds[self._kind] = self.action_kinds.get(self._kind, 0) + 1
         self._last_step = np.clip(step, -self.max_step, self.max_step)
         return self._last_step
+
+    def _spent(self, belief) -> bool:
+        """Whether the action budget is spent: ``max_actions``, or with ``extend_below``
+        ``extended_max_actions``, or ``max_actions`` once the belief is that sure."""
+        p = self.params
+        if self.actions < p.max_actions:
+            return False
+        if p.extend_below is None or self.actions >= p.extended_max_actions:
+            return True
+        return belief_of(belief)[1] >= p.extend_below
 
     def sensed(self, points) -> None:
         """The contact points (m, W) of the latest action whose contacts are known (they come

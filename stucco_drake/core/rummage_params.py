@@ -24,7 +24,12 @@ class RummageParams:
             no evidence that the target is among what was felt).
         back_off: step back along -x after a push that sensed contact.
         arrive_tolerance: distance at which a lane's waypoint counts as reached.
-        max_actions: actions in all.
+        max_actions: actions in all (with ``extend_below``, while the belief is sure enough).
+        extend_below: None (off) or a confidence. Once ``max_actions`` are spent, the policy
+            goes on while the belief's confidence is below this, up to
+            ``extended_max_actions`` in all: a run whose target is not yet placed gets more
+            actions, a placed one stops at the budget.
+        extended_max_actions: see ``extend_below``.
         max_rounds: probe rounds in all.
         lane_rounds: probe rounds per lane (a round spent on clutter the belief took for the
             target leaves the rounds of the lanes after it).
@@ -128,6 +133,8 @@ class RummageParams:
     back_off: float = 0.02
     arrive_tolerance: float = 0.005
     max_actions: int = 120
+    extend_below: float | None = None
+    extended_max_actions: int = 0
     max_rounds: int = 6
     lane_rounds: int = 2
     lane_bumps: int = 2
@@ -152,7 +159,16 @@ class RummageParams:
     probe_once_placed: bool = False
     check_each_probe: bool = False
 
+    @property
+    def action_budget(self) -> int:
+        """The most actions a run may take (``extended_max_actions`` when extended)."""
+        return self.max_actions if self.extend_below is None else self.extended_max_actions
+
     def __post_init__(self):
+        if self.extend_below is not None and self.extended_max_actions <= self.max_actions:
+            raise ValueError(f"extended_max_actions: with extend_below, needs more than "
+                             f"max_actions ({self.max_actions}), got "
+                             f"{self.extended_max_actions}")
         if self.shove_gave_way_below is not None and not self.press_step > 0:
             raise ValueError("shove_gave_way_below: needs press_step > 0 (a touch alone may "
                              "end before its force builds up)")

@@ -36,20 +36,11 @@ from typing import ClassVar
 import numpy as np
 
 from stucco_drake.core.flank import plan_flank
-from stucco_drake.core.lane_walk import LaneWalk
+from stucco_drake.core.lane_walk import LaneWalk, belief_of
 from stucco_drake.core.motion_scale import GRAVITY
 from stucco_drake.core.probing import FaceProbePolicy, outline_box
 from stucco_drake.core.rummage_params import RummageParams
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
-
-
-def _belief_of(belief) -> tuple[np.ndarray | None, float]:
-    """(likeliest pose or None, confidence) of the pose hypotheses ``belief`` (an object with
-    ``pose`` and ``confidence``, None, or a function returning either)."""
-    belief = belief() if callable(belief) else belief
-    if belief is None:
-        return None, 0.0
-    return np.asarray(belief.pose, dtype=np.float64), float(belief.confidence)
 
 
 class BeliefRummagingPolicy(LaneWalk):
@@ -158,7 +149,7 @@ class BeliefRummagingPolicy(LaneWalk):
         return push * self.params.press_step
 
     def _believe(self, belief) -> float:
-        self.pose, self.confidence = _belief_of(belief)
+        self.pose, self.confidence = belief_of(belief)
         self.trace.append((self.actions, self.confidence))
         return self.confidence
 

@@ -80,7 +80,9 @@ class RummagingPolicy(LeafSystem):
         self._duration = float(duration)
         self._body = int(gripper_frame.body().index())
         self._X_BG = gripper_frame.GetFixedPoseInBodyFrame()
-        self._max_actions = int(policy.params.max_actions)
+        params = policy.params
+        # A probe policy (ProbeParams) has no extension of its budget.
+        self._max_actions = int(getattr(params, "action_budget", params.max_actions))
         self._poses = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()]))
         self._verdict = self.DeclareAbstractInputPort(
