@@ -308,8 +308,7 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
         # (a withdrawal's raise may already be over: the clock ran on to the attempt's close)
         simulator.AdvanceTo(max(context.get_time(),
                                 t_attempt + executor.phase_end(executor_context, end)))
-    if executor.withdrew(executor_context):
-        return _withdrawn(built, context, target, z_before, t0, wall0, attempt)
+    withdrew = executor.withdrew(executor_context)
     plant_context = plant.GetMyContextFromRoot(context)
     geometric_ok, geometry = geometric_check(
         target.EvalPoseInWorld(plant_context),
@@ -317,9 +316,10 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
 
     # A target that is not between the closed fingers cannot be lifted by them: the grasp has
     # failed, and the lift and hold (the costliest part to simulate, squeezing) are skipped.
-    closed_on = between_fingers(built.gripper_frame().CalcPoseInWorld(plant_context),
-                                target.EvalPoseInWorld(plant_context).translation(),
-                                _finger_positions(built, plant_context))
+    closed_on = not withdrew and between_fingers(
+        built.gripper_frame().CalcPoseInWorld(plant_context),
+        target.EvalPoseInWorld(plant_context).translation(),
+        _finger_positions(built, plant_context))
     if closed_on:
         simulator.AdvanceTo(t_attempt + executor.total_duration(executor_context))
     plant_context = plant.GetMyContextFromRoot(context)
@@ -332,7 +332,9 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
     reasons = []
     if lift < min_lift:
         reasons.append(f"lifted {lift:.3f} m < {min_lift:.3f} m")
-    if not closed_on:
+    if withdrew:
+        reasons.append(f"every attempt blocked ({attempt}): withdrew without closing")
+    elif not closed_on:
         reasons.append("target not between the fingers after closing (no lift attempted)")
     elif not held:
         reasons.append("target not between the fingers")
@@ -341,17 +343,6 @@ def execute_grasp(built: BuiltScene, simulator: Simulator, target_pose, target_s
         success=success, lift_height=lift, geometric_ok=geometric_ok,
         final_pose=np.array([*X_WO.translation(), yaw_of(X_WO.rotation())]),
         reason=f"{reason} (geometry: {geometry})", sim_time=context.get_time() - t0,
-        wall_time=time.perf_counter() - wall0, attempts=attempt + 1)
+        wall_time=time.perf_counter() - wall0, withdrew=withdrew,
+        attempts=attempt if withdrew else attempt + 1)  # the withdrawal's index: the count
 
-
-def _withdrawn(built: BuiltScene, context, target, z_before: float, t0: float, wall0: float,
-               attempts: int) -> GraspResult:
-    """The failed :class:`GraspResult` of a grasp whose every attempt was blocked."""
-    X_WO = target.EvalPoseInWorld(built.plant.GetMyContextFromRoot(context))
-    lift = float(X_WO.translation()[2] - z_before)
-    return GraspResult(
-        success=False, lift_height=lift, geometric_ok=False,
-        final_pose=np.array([*X_WO.translation(), yaw_of(X_WO.rotation())]),
-        reason=f"every attempt blocked ({attempts}): withdrew without closing",
-        sim_time=context.get_time() - t0, wall_time=time.perf_counter() - wall0,
-        attempts=attempts, withdrew=True)

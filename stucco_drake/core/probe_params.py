@@ -93,6 +93,11 @@ class ProbeParams:
     felt_obstacles: bool = False
     gain_per_action: bool = False
 
+    @property
+    def action_budget(self) -> int:
+        """The most actions a run may take (``max_actions``; as ``RummageParams``')."""
+        return self.max_actions
+
     def __post_init__(self):
         if self.face_step is not None and not self.face_step > 0:
             raise ValueError(f"face_step: expected a positive step (m) or null, "

@@ -44,7 +44,7 @@ class PolicyState:
 class RummagingPolicy(LeafSystem):
     """Source of the planar step of every action (m, world frame): ``prescribed`` steps, then
     ``policy``'s (any object with ``next_step(gripper_xy, in_contact, hypotheses)``,
-    ``copy()`` and ``params.max_actions``, as the policies of the module docstring).
+    ``copy()`` and ``params.action_budget``, as the policies of the module docstring).
 
     The step of action k is decided at t = k ``duration`` (its start), from the inputs then:
     the output computes it from the state of action k-1 without changing anything, and the
@@ -80,9 +80,7 @@ class RummagingPolicy(LeafSystem):
         self._duration = float(duration)
         self._body = int(gripper_frame.body().index())
         self._X_BG = gripper_frame.GetFixedPoseInBodyFrame()
-        params = policy.params
-        # A probe policy (ProbeParams) has no extension of its budget.
-        self._max_actions = int(getattr(params, "action_budget", params.max_actions))
+        self._max_actions = int(policy.params.action_budget)
         self._poses = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()]))
         self._verdict = self.DeclareAbstractInputPort(
