@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import multiprocessing
+import os
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable
 
@@ -122,20 +124,37 @@ def run_table(
     return recorded
 
 
+def _exit_with_parent() -> None:
+    """Process-pool initializer: end this worker as soon as the process that started the pool
+    ends, killed included. Otherwise a stopped table's workers run on, simulating episodes and
+    writing their logs into the folder for a table nobody is running."""
+    parent = multiprocessing.parent_process()
+    if parent is None:  # not started by multiprocessing: nothing to watch
+        return
+
+    def watch():
+        parent.join()  # returns when the parent's end of the sentinel pipe closes
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def make_executor(kind: str = "process", workers: int | None = None, scheduler: str | None = None):
     """An executor for :func:`run_table`.
 
     Args:
         kind: "process" (a local process pool) or "dask" (a Dask cluster's executor).
-        workers: processes of the pool (default: one per CPU); for "dask" without a
-            scheduler, the workers of the local cluster it starts.
+        workers: processes of the pool (default: one per CPU), each ended when the calling
+            process ends, however it ends; for "dask" without a scheduler, the workers of
+            the local cluster it starts.
         scheduler: a Dask scheduler address ("tcp://host:8786"); None starts a local cluster.
             Workers must see the same file system (episode logs are read by path).
     """
     if kind == "process":
         # Spawned, not forked: a forked child inherits Drake's and BLAS's threads in an
-        # undefined state.
-        return cf.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+        # undefined state. Each worker ends with the table's process.
+        return cf.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                      initializer=_exit_with_parent)
     if kind == "dask":
         try:
             from dask.distributed import Client
