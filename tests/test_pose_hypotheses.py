@@ -15,7 +15,7 @@ from stucco_drake.core.pose_hypotheses import (
     pose_hypotheses,
     weigh_hypotheses,
 )
-from stucco_drake.core.shapes import BoxSdf
+from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 
 BOX = BoxSdf((0.08, 0.04, 0.05))
 TRUE_POSE = np.array([0.5, 0.1, 0.3])
@@ -181,3 +181,46 @@ def test_variants_of_one_rival_count_once_in_the_tempered_confidence():
     found = weigh_hypotheses(poses, costs, explained, BOX,
                              HypothesisParams(confidence_temperature=10.0))  # fmt: skip
     assert found.confidence == pytest.approx(1.0 / (1.0 + np.exp(-0.4)), abs=1e-12)
+
+
+def test_points_felt_under_the_light_force_move_the_estimate_off_a_big_can_onto_the_target():
+    """A 3.8 cm can touched on 4 points of its arc, and 20 cm away a 10.2 cm can touched on 8
+    points of a 0.5 rad (5 cm) arc, all of which the small outline explains within the
+    estimator's 4 mm contact noise. Counting points, the big can wins. The big can slid under
+    2.5 N, the target met 12 N: with ``light_force`` 4.9 N, the big can's points cannot lie on
+    the target, and the estimate is the target's true centre."""
+    rng = np.random.default_rng(5)
+    target, big = np.array([0.30, 0.10]), np.array([0.30, 0.40])
+    small_arc = np.linspace(-2.2, -1.0, 4)  # the target's side facing -y
+    big_arc = np.linspace(1.0, 1.5, 8)  # the big can's far side, away from the target
+    points = np.vstack([
+        target + 0.038 * np.column_stack([np.cos(small_arc), np.sin(small_arc)]),
+        big + 0.102 * np.column_stack([np.cos(big_arc), np.sin(big_arc)]),
+    ]) + rng.normal(0.0, NOISE, (12, 2))  # fmt: skip
+    points = np.column_stack([points, np.full(12, HEIGHT)])
+    labels = np.array([0] * 4 + [1] * 8)
+    forces = np.array([12.0] * 4 + [2.5] * 8)
+    can = CylinderSdf(0.038, 0.06)
+    counted = pose_hypotheses(np.random.default_rng(6), points, labels, can,
+                              point_forces=forces)  # no light_force: the forces are not used
+    assert np.hypot(*(counted.pose[:2] - target)) > 0.2  # on the big can, explaining its 8
+    assert counted.explained[counted.chosen].tolist() == [False] * 4 + [True] * 8
+    params = HypothesisParams(light_force=4.9)
+    weighed = pose_hypotheses(np.random.default_rng(6), points, labels, can, params=params,
+                              point_forces=forces)  # fmt: skip
+    # Four points at 1.5 mm noise on a third of the outline: the centre to within 5 mm.
+    assert np.hypot(*(weighed.pose[:2] - target)) < 0.005
+    assert weighed.explained[weighed.chosen].tolist() == [True] * 4 + [False] * 8
+    # An unknown force (NaN) is never light: the same points without forces are counted.
+    unknown = pose_hypotheses(np.random.default_rng(6), points, labels, can, params=params,
+                              point_forces=np.full(12, np.nan))  # fmt: skip
+    assert np.allclose(unknown.pose, counted.pose)
+
+
+def test_light_force_settings_are_checked():
+    with pytest.raises(ValueError, match="light_force"):
+        HypothesisParams(light_force=0.0)
+    points = np.column_stack([np.linspace(0.0, 0.05, 4), np.zeros(4), np.full(4, HEIGHT)])
+    with pytest.raises(ValueError, match=r"point_forces: expected \(4,\)"):
+        pose_hypotheses(np.random.default_rng(0), points, np.zeros(4, dtype=np.int64), BOX,
+                        params=HypothesisParams(light_force=4.9), point_forces=np.ones(3))

@@ -19,9 +19,11 @@ ACTION_PERIOD = 0.1  # s per action in the scripted clock
 class ScriptedActions(LeafSystem):
     """Plays recorded observations: action k completes at t = (k + 1) * period."""
 
-    def __init__(self, observations):
+    def __init__(self, observations, peak_forces=None):
         super().__init__()
         self._observations = observations
+        # (k,) each action's peak force (N); None: not measured (NaN).
+        self._peak_forces = peak_forces
         self.DeclareAbstractOutputPort(
             "ee_pose", lambda: AbstractValue.Make(RigidTransform()), self._pose
         )
@@ -43,7 +45,8 @@ class ScriptedActions(LeafSystem):
             output.set_value(ActionContacts())
             return
         obs = self._observations[k]
-        output.set_value(ActionContacts(k, obs.contact_points, obs.contact_dx))
+        force = np.nan if self._peak_forces is None else self._peak_forces[k]
+        output.set_value(ActionContacts(k, obs.contact_points, obs.contact_dx, force))
 
 
 def build(tracker, observations, seed):

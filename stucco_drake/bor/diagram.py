@@ -29,7 +29,11 @@ from stucco_drake.bor.grasp import build_grasp_scene
 from stucco_drake.bor.policies import PolicySettings, add_policy
 from stucco_drake.core.baselines import make_tracker
 from stucco_drake.core.hypothesis_params import HypothesisParams
-from stucco_drake.core.motion_scale import MOTION_SCALES, scales_under_push_limit
+from stucco_drake.core.motion_scale import (
+    MOTION_SCALES,
+    check_light_force,
+    scales_under_push_limit,
+)
 from stucco_drake.core.penetration import RobotPenetration
 from stucco_drake.core.shapes import BoxSdf, CylinderSdf
 from stucco_drake.robot.gripper_sdf import gripper_penetration
@@ -277,6 +281,8 @@ def build_bor_diagram(
     observer, stats = _observer_settings(scene, h, estimator_gain, torque_seed)
     action_index = _action_index(builder, sub, scene, external_actions or policy is not None,
                                  export=policy is None)
+    if hypothesis_params is not None and hypothesis_params.light_force is not None:
+        check_light_force(hypothesis_params.light_force, **target_slide(built))
     robot = ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))
     truth = RobotObjectContacts(built)
     chain = add_contact_tracking(

@@ -48,6 +48,14 @@ class HypothesisParams:
         contact_location_noise: standard deviation (m) across a push of where along the
             gripper's front a contact is sensed about where the pose would meet it
             (:mod:`~stucco_drake.core.contact_location`); None (the default): not scored.
+        light_force: a contact point sensed in an action whose peak force (N) stayed below
+            this lies on an object that gave way more easily than the target does: it is never
+            put on the target (:mod:`~stucco_drake.core.pose_hypotheses`). Keep it at most half
+            the target's sliding friction force (friction x mass x g), or a target that slid
+            would be read as clutter; the builder refuses more. A touch that ends its action
+            can meet little force on anything, so a heavy target's own bound is no guide:
+            4.9 N is half that of a 2 kg can at friction 0.5. None (the default): forces are
+            not used.
         min_explained: fewest contact points the chosen pose must explain for any confidence.
         n_restarts: ICP starts per proposal group.
         outline_spacing: spacing of the outline points ICP fits.
@@ -88,6 +96,7 @@ class HypothesisParams:
     temperature: float = 1.0
     confidence_temperature: float | None = None
     contact_location_noise: float | None = None
+    light_force: float | None = None
     min_explained: int = 3
     n_restarts: int = 20
     outline_spacing: float = 0.002
@@ -107,3 +116,5 @@ class HypothesisParams:
 
     def __post_init__(self):
         check_box_approach(self.box_approach)
+        if self.light_force is not None and not self.light_force > 0:
+            raise ValueError(f"light_force: expected > 0 N or None, got {self.light_force!r}")

@@ -65,6 +65,20 @@ def scales_under_push_limit(mass: float, friction: float, max_push_force: float 
     return tuple(float(s) for s in checked_scales(scales))
 
 
+def check_light_force(light_force: float | None, mass: float, friction: float,
+                      max_push_force: float | None = None) -> None:
+    """ValueError unless ``light_force`` (N; None passes) is at most half the force that
+    slides a target of ``mass`` (kg) with Coulomb ``friction``: a target that slid would
+    otherwise be read as clutter (:attr:`HypothesisParams.light_force`). ``max_push_force``
+    is accepted so that :func:`~stucco_drake.bor.diagram.target_slide`'s mapping can be passed
+    whole; it does not enter."""
+    del max_push_force
+    bound = 0.5 * friction * mass * GRAVITY
+    if light_force is not None and light_force > bound:
+        raise ValueError(f"light_force: {light_force} N is more than half the force that slides "
+                         f"the target ({bound:.2f} N: friction {friction} x {mass} kg x g)")
+
+
 def checked_scales(scales) -> np.ndarray:
     """``scales`` as a (k,) float array; ValueError unless at least one, each in [0, 1]."""
     scales = np.asarray(scales, dtype=np.float64).reshape(-1)
@@ -77,7 +91,8 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
                              shape: BoxSdf | CylinderSdf, *,
                              free_space: FreeSpace | None = None,
                              params: HypothesisParams | None = None,
-                             scales=MOTION_SCALES) -> PoseHypotheses | None:  # fmt: skip
+                             scales=MOTION_SCALES,
+                             point_forces=None) -> PoseHypotheses | None:  # fmt: skip
     """Weighted target-pose hypotheses over poses and motion scales (see the module).
 
     Args:
@@ -89,6 +104,8 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
         free_space: where the robot has been (None: contact evidence only).
         params: the search's settings (None: ``HypothesisParams()``).
         scales: the motion scales searched (each in [0, 1]).
+        point_forces: (n,) the peak force (N) of the action that sensed each point (NaN:
+            unknown), judged against ``params.light_force``; None for none.
 
     Returns:
         The pooled hypotheses with each one's ``motion_scales``, or None when no placement of
@@ -113,7 +130,8 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
         result = search_hypotheses(rng, sensed + scale * motion, labels, shape,
                                    spread=params.transport_noise * scale * travelled,
                                    free_space=free_space, params=params,
-                                   carried=scale * motion, height=height)  # fmt: skip
+                                   carried=scale * motion, height=height,
+                                   point_forces=point_forces)  # fmt: skip
         if result is not None:
             found.append((*result, np.full(len(result[0]), scale)))
     if not found:
@@ -125,4 +143,5 @@ def motion_scaled_hypotheses(rng: np.random.Generator, sensed, tracked, labels,
     return dataclasses.replace(found, felt=felt[:, :2])
 
 
-__all__ = ["GRAVITY", "MOTION_SCALES", "motion_scaled_hypotheses", "scales_under_push_limit"]
+__all__ = ["GRAVITY", "MOTION_SCALES", "check_light_force", "motion_scaled_hypotheses",
+           "scales_under_push_limit"]

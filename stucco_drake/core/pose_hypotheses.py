@@ -19,6 +19,9 @@ RSS 2023: contact points lie on the object's surface, free-space points outside 
   nothing (:mod:`~stucco_drake.core.free_space`). Earlier configs do not count, since the
   target may have been pushed there since. Each cross-section point's deepest penetration
   beyond a tolerance over those configs costs ``depth / free_space_scale``.
+- **Force.** With ``light_force`` set, a point sensed in an action whose peak force stayed
+  below it lies on an object that gave way more easily than the target: it is never put on
+  the target's surface: it costs ``other_object_cost`` under every pose.
 - **Shape.** Only poses of the known outline are proposed: ICP of the outline on every segment
   of tracked points, on every part of a segment wider than the target, and on every union of
   two segments the target could span; each is then refitted on the points it explains.
@@ -124,23 +127,26 @@ def tracker_spread(tracker) -> np.ndarray | None:
     return point_spread(tracker.points, tracker.log_weights)
 
 
-def contact_costs(poses, points, sigma, shape, params: HypothesisParams):
-    """(B,) contact cost of each pose and (B, n) which points it explains (see the module)."""
+def contact_costs(poses, points, sigma, shape, params: HypothesisParams, light=None):
+    """(B,) contact cost of each pose and (B, n) which points it explains (see the module);
+    ``light`` (n,) bool: points that cannot lie on the target (None: none)."""
     d = cross_section_sdf(shape)(to_pose_frames(poses, points[:, :2]))
     on_surface = d**2 / (2.0 * sigma**2) + np.log(sigma / params.contact_noise)
+    if light is not None:
+        on_surface = np.where(light, np.inf, on_surface)
     elsewhere = params.other_object_cost + np.minimum(d, 0.0) ** 2 / (2.0 * sigma**2)
     explained = on_surface < elsewhere
     return np.minimum(on_surface, elsewhere).sum(axis=1), explained
 
 
 def grid_candidates(points, sigma, shape, params: HypothesisParams, swept=None,
-                    point_steps=None, fill=None,
-                    fill_weight: float = 1.0) -> np.ndarray:  # fmt: skip
+                    point_steps=None, fill=None, fill_weight: float = 1.0,
+                    light=None) -> np.ndarray:  # fmt: skip
     """The ``n_candidates`` poses of lowest contact and free-space cost on a grid
     (``grid_spacing``, ``grid_yaw``) of every placement whose outline could reach a tracked
     point: the search that ICP's local fits on segments can miss (a segment holding clutter
     pulls them off). Free space (None: none) is judged on the cross-section points ``fill``,
-    its cost times ``fill_weight``."""
+    its cost times ``fill_weight``; ``light`` as :func:`contact_costs`'s."""
     reach = outline_extent(shape) / 2.0
     lower, upper = points[:, :2].min(axis=0) - reach, points[:, :2].max(axis=0) + reach
     axes = [np.arange(lo, hi + 1e-12, params.grid_spacing)
@@ -164,20 +170,21 @@ def grid_candidates(points, sigma, shape, params: HypothesisParams, swept=None,
     block = max(1, (1 << 21) // len(points))  # bounded memory: poses x points per block
     costs = np.empty(len(grid))
     for k in range(0, len(grid), block):
-        contact, explained = contact_costs(grid[k:k + block], points, sigma, shape, params)
+        contact, explained = contact_costs(grid[k:k + block], points, sigma, shape, params,
+                                           light)  # fmt: skip
         costs[k:k + block] = contact + fill_weight * free_space_costs(
             grid[k:k + block], explained, swept, point_steps, fill, params)
     keep = min(params.n_candidates, len(grid))
     return grid[np.argsort(costs, kind="stable")[:keep]]
 
 
-def _polish(rng, poses, points, sigma, shape, outline, params: HypothesisParams):
+def _polish(rng, poses, points, sigma, shape, outline, params: HypothesisParams, light=None):
     """Each pose refitted by ICP on the points it explains, explained again, up to
     ``polish_iterations`` times (an EM of point assignment and pose)."""
     polished = []
     for pose in poses:
         for _ in range(params.polish_iterations):
-            _, explained = contact_costs(pose[None], points, sigma, shape, params)
+            _, explained = contact_costs(pose[None], points, sigma, shape, params, light)
             if explained[0].sum() < params.min_explained:
                 break
             fitted = icp_2d(rng, points[explained[0], :2], outline, 1, initial_pose=pose)
@@ -234,7 +241,7 @@ def _distinct(poses, shape, outline, resolution: float) -> np.ndarray:
 
 def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
                     *, spread=None, free_space: FreeSpace | None = None,
-                    params: HypothesisParams | None = None,
+                    params: HypothesisParams | None = None, point_forces=None,
                     ) -> PoseHypotheses | None:  # fmt: skip
     """Weighted target-pose hypotheses from tracked contact points (see the module).
 
@@ -247,6 +254,8 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
             :func:`point_spread`); None for none.
         free_space: where the robot has been (None: contact evidence only).
         params: the settings (None: the defaults).
+        point_forces: (n,) the peak force (N) of the action that sensed each point (NaN:
+            unknown), judged against ``params.light_force``; None for none.
 
     Returns:
         The hypotheses, or None when no placement of the target can touch ``min_explained``
@@ -257,7 +266,7 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
     """
     params = params or HypothesisParams()
     found = search_hypotheses(rng, points, labels, shape, spread=spread, free_space=free_space,
-                              params=params)  # fmt: skip
+                              params=params, point_forces=point_forces)  # fmt: skip
     if found is None:
         return None
     return dataclasses.replace(weigh_hypotheses(*found, shape, params),
@@ -267,7 +276,7 @@ def pose_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | Cy
 def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | CylinderSdf,
                       *, spread=None, free_space: FreeSpace | None = None,
                       params: HypothesisParams | None = None, carried=None,
-                      height: float | None = None):  # fmt: skip
+                      height: float | None = None, point_forces=None):  # fmt: skip
     """The poses :func:`pose_hypotheses` weighs, with their costs and the points each explains
     ((k, 3), (k,), (k, n)), before any is left out; None when no placement can touch
     ``min_explained`` points. Arguments and errors as :func:`pose_hypotheses`'s; ``carried``
@@ -285,6 +294,7 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
     reach = outline_extent(shape) + 3.0 * params.contact_noise
     if np.bincount(labels[labels >= 0], minlength=1).max() < params.min_explained:
         raise ValueError(f"labels: no segment has at least {params.min_explained} points")
+    light = light_points(point_forces, len(points), params)
     groups = _proposal_groups(points, labels, reach, params.min_explained)
     outline = sample_outline(shape, params.outline_spacing)
     # Hypotheses are compared on a coarser outline, and count as one within its spacing.
@@ -298,7 +308,7 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
 
     def scored(poses):
         poses = _distinct(poses, shape, coarse, params.fill_spacing)
-        contact, explained = contact_costs(poses, points, sigma, shape, params)
+        contact, explained = contact_costs(poses, points, sigma, shape, params, light)
         costs = contact + free_space_costs(poses, explained, swept, steps, fill, params)
         return poses, costs + (0.0 if located is None else located(poses, explained)), explained
 
@@ -307,15 +317,27 @@ def search_hypotheses(rng: np.random.Generator, points, labels, shape: BoxSdf | 
     # sparse, each point counting for the points it stands for.
     sparse = sample_cross_section(shape, 2.0 * params.fill_spacing)
     grid = grid_candidates(points, sigma, shape, params, swept, steps, sparse,
-                           len(fill) / len(sparse))  # fmt: skip
+                           len(fill) / len(sparse), light)  # fmt: skip
     candidates = np.concatenate([*fits, grid])
     if len(candidates) == 0:
         return None
     poses, costs, _ = scored(candidates)
     best = poses[np.argsort(costs, kind="stable")[:params.n_polish]]
     poses, costs, explained = scored(np.concatenate(
-        [poses, _polish(rng, best, points, sigma, shape, outline, params)]))
+        [poses, _polish(rng, best, points, sigma, shape, outline, params, light)]))
     return poses, costs, explained
+
+
+def light_points(point_forces, n: int, params: HypothesisParams) -> np.ndarray | None:
+    """(n,) whether each point was sensed in an action whose peak force (``point_forces``
+    (n,), N; NaN: unknown, never light) stayed below ``params.light_force``; None when either
+    is None. ValueError naming ``point_forces`` unless it holds n values."""
+    if point_forces is None or params.light_force is None:
+        return None
+    forces = np.asarray(point_forces, dtype=np.float64)
+    if forces.shape != (n,):
+        raise ValueError(f"point_forces: expected ({n},) peak forces, got {forces.shape}")
+    return forces < params.light_force  # NaN compares False
 
 
 def weigh_hypotheses(poses, costs, explained, shape: BoxSdf | CylinderSdf,

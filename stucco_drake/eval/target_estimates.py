@@ -93,8 +93,12 @@ def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: Robot
         return None
     free = FreeSpace(penetration, log.ee_position, log.ee_rotation[-1], point_steps(log),
                      free_actions=np.diff(log.contact_offsets) == 0)
+    forces = None
+    if len(log.action_peak_force):  # older logs did not keep the forces
+        forces = np.repeat(log.action_peak_force, np.diff(log.contact_offsets))
     return motion_scaled_hypotheses(rng, log.contact_points, points, labels, shape,
-                                    free_space=free, params=params, scales=scales)  # fmt: skip
+                                    free_space=free, params=params, scales=scales,
+                                    point_forces=forces)  # fmt: skip
 
 
 def target_surface_distance(shape, points, pose) -> np.ndarray:

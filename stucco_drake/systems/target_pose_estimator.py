@@ -40,6 +40,8 @@ class EstimatorState:
         default_factory=lambda: np.zeros(0, dtype=np.int64))
     # (n, 3) each tracked point where it was sensed (m, world), in the same order.
     sensed_points: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 3)))
+    # (n,) the peak force (N; NaN: not measured) of the action that sensed each point.
+    point_forces: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     # (k,) whether each action of config_positions sensed no contact (its path is free space).
     free_actions: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=bool))
     last_action_index: int = -1
@@ -53,7 +55,7 @@ class EstimatorState:
         return dataclasses.replace(
             self, rng=copy.deepcopy(self.rng), config_positions=self.config_positions.copy(),
             point_steps=self.point_steps.copy(), sensed_points=self.sensed_points.copy(),
-            free_actions=self.free_actions.copy(),
+            point_forces=self.point_forces.copy(), free_actions=self.free_actions.copy(),
             estimate=copy.deepcopy(self.estimate))
 
 
@@ -84,8 +86,10 @@ class TargetPoseEstimator(LeafSystem):
             with the per-segment report.
         pose_hypotheses: weighted hypotheses of the target's pose from the points (where sensed
             and where tracked, see ``motion_scales``), the free space of the configs visited
-            and the target's outline (a generator seeded by ``[seed, action index]``); None
-            while no segment has enough points. Computed only when evaluated.
+            and the target's outline (a generator seeded by ``[seed, action index]``), and
+            with ``hypothesis_params.light_force`` the peak force of the action that sensed
+            each point (``tracked_action``'s ``peak_force``); None while no segment has
+            enough points. Computed only when evaluated.
         target_confidence: 1-vector, the hypotheses' confidence (0 to 1): the posterior
             probability that a grasp at their chosen pose closes on the target; 0 without
             hypotheses.
@@ -190,6 +194,8 @@ class TargetPoseEstimator(LeafSystem):
                                            np.asarray(contacts.points, float).reshape(-1, 3)])
         updated.point_steps = np.concatenate(
             [current.point_steps, np.full(len(contacts.points), step, dtype=np.int64)])
+        updated.point_forces = np.concatenate(
+            [current.point_forces, np.full(len(contacts.points), contacts.peak_force)])
         points = self._points.Eval(context)
         labels = np.asarray(self._labels.Eval(context))
         enough = len(labels) and np.bincount(labels[labels >= 0]).max(initial=0) >= 3
@@ -246,12 +252,12 @@ class TargetPoseEstimator(LeafSystem):
             output.set_value(pose_hypotheses(
                 rng, points[:n], labels[:n], self.target_shape,
                 spread=None if spread is None else spread[:n], free_space=free,
-                params=self.hypothesis_params))  # fmt: skip
+                params=self.hypothesis_params, point_forces=state.point_forces[:n]))  # fmt: skip
             return
         output.set_value(motion_scaled_hypotheses(
             rng, state.sensed_points[:n], points[:n], labels[:n], self.target_shape,
             free_space=free, params=self.hypothesis_params,
-            scales=self.motion_scales))  # fmt: skip
+            scales=self.motion_scales, point_forces=state.point_forces[:n]))  # fmt: skip
 
     def calc_pose_hypotheses(self, context, output):
         output.set_value(self._hypotheses.Eval(context))
