@@ -310,3 +310,15 @@ def test_hypothesis_params_reach_the_diagrams_target_pose_estimator():
     default = build_bor_diagram("FB").diagram.GetSubsystemByName("target_pose_estimator")
     assert default.hypothesis_params == HypothesisParams()
     assert default.hypothesis_params.confidence_temperature is None
+
+
+def test_a_light_force_the_target_could_slide_under_is_refused_at_build():
+    """TC's 2 kg can at friction 0.5 slides under 9.81 N: 4.9 N is accepted, 5 N refused with
+    the bound in the message (the scene's own model's mass and friction, read from the plant)."""
+    from stucco_drake.bor.diagram import build_bor_diagram
+    from stucco_drake.core.hypothesis_params import HypothesisParams
+
+    bor = build_bor_diagram("TC", hypothesis_params=HypothesisParams(light_force=4.9))
+    assert bor.target_estimator.hypothesis_params.light_force == 4.9
+    with pytest.raises(ValueError, match=r"light_force: 5.0 N is more than half .*4.91 N"):
+        build_bor_diagram("TC", hypothesis_params=HypothesisParams(light_force=5.0))
