@@ -158,8 +158,8 @@ def test_a_target_the_push_limit_cannot_slide_is_searched_where_sensed():
 def test_a_light_force_above_half_the_targets_sliding_force_is_refused():
     # A 2 kg can at friction 0.5 slides under 9.81 N: half is 4.905 N. The 10 kg box's half,
     # 24.5 N, leaves room for any light_force below it.
-    check_light_force(4.9, 2.0, 0.5, 30.0)
+    check_light_force(4.9, 2.0, 0.5)
     check_light_force(None, 0.1, 0.5)
     check_light_force(24.5, 10.0, 0.5)
     with pytest.raises(ValueError, match=r"light_force: 4.91 N is more than half .* \(4.91 N"):
-        check_light_force(4.91, 2.0, 0.5, 30.0)
+        check_light_force(4.91, 2.0, 0.5)

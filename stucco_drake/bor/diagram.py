@@ -282,7 +282,8 @@ def build_bor_diagram(
     action_index = _action_index(builder, sub, scene, external_actions or policy is not None,
                                  export=policy is None)
     if hypothesis_params is not None and hypothesis_params.light_force is not None:
-        check_light_force(hypothesis_params.light_force, **target_slide(built))
+        slide = target_slide(built)
+        check_light_force(hypothesis_params.light_force, slide["mass"], slide["friction"])
     robot = ObservedRobot(**iiwa_observed_robot_arguments(X_WB, fingers))
     truth = RobotObjectContacts(built)
     chain = add_contact_tracking(

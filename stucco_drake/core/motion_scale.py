@@ -65,14 +65,10 @@ def scales_under_push_limit(mass: float, friction: float, max_push_force: float 
     return tuple(float(s) for s in checked_scales(scales))
 
 
-def check_light_force(light_force: float | None, mass: float, friction: float,
-                      max_push_force: float | None = None) -> None:
+def check_light_force(light_force: float | None, mass: float, friction: float) -> None:
     """ValueError unless ``light_force`` (N; None passes) is at most half the force that
     slides a target of ``mass`` (kg) with Coulomb ``friction``: a target that slid would
-    otherwise be read as clutter (:attr:`HypothesisParams.light_force`). ``max_push_force``
-    is accepted so that :func:`~stucco_drake.bor.diagram.target_slide`'s mapping can be passed
-    whole; it does not enter."""
-    del max_push_force
+    otherwise be read as clutter (:attr:`HypothesisParams.light_force`)."""
     bound = 0.5 * friction * mass * GRAVITY
     if light_force is not None and light_force > bound:
         raise ValueError(f"light_force: {light_force} N is more than half the force that slides "

@@ -21,7 +21,7 @@ RSS 2023: contact points lie on the object's surface, free-space points outside 
   beyond a tolerance over those configs costs ``depth / free_space_scale``.
 - **Force.** With ``light_force`` set, a point sensed in an action whose peak force stayed
   below it lies on an object that gave way more easily than the target: it is never put on
-  the target's surface: it costs ``other_object_cost`` under every pose.
+  the target's surface, and costs ``other_object_cost`` under every pose.
 - **Shape.** Only poses of the known outline are proposed: ICP of the outline on every segment
   of tracked points, on every part of a segment wider than the target, and on every union of
   two segments the target could span; each is then refitted on the points it explains.
