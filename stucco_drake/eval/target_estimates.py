@@ -91,11 +91,11 @@ def hypotheses_estimate(rng, log: EpisodeLog, tracker, shape, penetration: Robot
     points, labels = tracker.map_points(), np.asarray(tracker.segment())
     if np.bincount(labels[labels >= 0], minlength=1).max() < params.min_explained:
         return None
-    free = FreeSpace(penetration, log.ee_position, log.ee_rotation[-1], point_steps(log),
+    steps = point_steps(log)
+    free = FreeSpace(penetration, log.ee_position, log.ee_rotation[-1], steps,
                      free_actions=np.diff(log.contact_offsets) == 0)
-    forces = None
-    if len(log.action_peak_force):  # older logs did not keep the forces
-        forces = np.repeat(log.action_peak_force, np.diff(log.contact_offsets))
+    # Each point's action's peak force (older logs did not keep the forces).
+    forces = log.action_peak_force[steps] if len(log.action_peak_force) else None
     return motion_scaled_hypotheses(rng, log.contact_points, points, labels, shape,
                                     free_space=free, params=params, scales=scales,
                                     point_forces=forces)  # fmt: skip
